@@ -1,0 +1,19 @@
+"""Grain shapes, their validation, mass properties, import and stabilisation sub-mesh."""
+
+from .mass import MassProperties, mass_properties
+from .polyhedron import (
+    BadFaceIndexError,
+    DegenerateFaceError,
+    DuplicateVerticesError,
+    GeometryError,
+    InconsistentOrientationError,
+    InwardOrientationError,
+    NonFiniteCoordinatesError,
+    NonManifoldEdgeError,
+    NonManifoldVertexError,
+    NonPositiveVolumeError,
+    OpenSurfaceError,
+    Polyhedron,
+    UnusedVertexError,
+)
+from .shapes import cube, hull_polyhedron, l_prism, rotation_matrix, sand_grain, tetrahedron
