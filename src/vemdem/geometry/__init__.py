@@ -1,5 +1,6 @@
 """Grain shapes, their validation, mass properties, import and stabilisation sub-mesh."""
 
+from .io import load_surface, save_surface
 from .mass import MassProperties, mass_properties
 from .polyhedron import (
     BadFaceIndexError,
@@ -17,3 +18,4 @@ from .polyhedron import (
     UnusedVertexError,
 )
 from .shapes import cube, hull_polyhedron, l_prism, rotation_matrix, sand_grain, tetrahedron
+from .submesh import SubMesh, SubMeshError, build_submesh, check_submesh

@@ -25,7 +25,7 @@ from numba import njit, prange
 
 from ..geometry.polyhedron import Polyhedron
 from ..geometry.submesh import SubMesh, augmented_points, build_submesh
-from .material import Material, neo_hooke
+from .material import Material, det3, neo_hooke
 from .projection import projection_gradients, projection_shape_functions
 
 
@@ -65,6 +65,7 @@ class GrainElements:
     kappa: np.ndarray  # (G,)
     block_ptr: np.ndarray  # (G+1,) offsets of the dense (3n x 3n) tangent block of each grain
     volume: np.ndarray  # (G,)
+    projection_grads: np.ndarray  # (N, 3) g_v of every vertex: F_Pi = sum_v x_v (x) g_v
     submeshes: list
     options: VemOptions
 
@@ -100,13 +101,14 @@ def build_elements(
     if submeshes is None:
         submeshes = [build_submesh(g, options.submesh) for g in grains]
     beta = options.beta_internal
-    refs, vptr, kptr, wptr, weights = [], [0], [0], [0], []
+    refs, vptr, kptr, wptr, weights, proj = [], [0], [0], [0], [], []
     pptr, pweight, nptr, nodes, grads, bptr = [0], [], [0], [], [], [0]
     for grain, mesh in zip(grains, submeshes):
         n = grain.n_vertices
         g = projection_gradients(grain.vertices, grain.faces, grain.volume)
         T = projection_shape_functions(mesh.virtual_points, grain.vertices, g) if mesh.n_virtual else np.zeros((0, n))
         refs.append(grain.vertices)
+        proj.append(g)
         vptr.append(vptr[-1] + n)
         kptr.append(kptr[-1] + mesh.n_virtual)
         weights.append(T.ravel())
@@ -144,6 +146,7 @@ def build_elements(
         kappa=np.full(G, material.kappa),
         block_ptr=i64(bptr),
         volume=np.array([g.volume for g in grains]),
+        projection_grads=np.vstack(proj),
         submeshes=list(submeshes),
         options=options,
     )
@@ -311,3 +314,30 @@ def block_indices(elements: GrainElements):
     result = (np.concatenate(rows), np.concatenate(cols))
     object.__setattr__(elements, "_block_indices", result)
     return result
+
+
+def projected_deformation_gradients(elements: GrainElements, x: np.ndarray) -> np.ndarray:
+    """F_Pi (G, 3, 3) of every grain at vertex positions x (N, 3)."""
+    outer = np.einsum("vi,vj->vij", x, elements.projection_grads)
+    return np.add.reduceat(outer, elements.vertex_ptr[:-1], axis=0)
+
+
+@njit(cache=True)
+def _cauchy(Fs, mu, kappa, out):
+    P = np.empty((3, 3))
+    A = np.empty((9, 9))
+    for g in range(len(Fs)):
+        F = Fs[g]
+        psi = neo_hooke(F, mu[g], kappa[g], False, P, A)
+        if psi == np.inf:
+            out[g, :, :] = np.nan
+            continue
+        out[g] = P @ F.T / det3(F)
+
+
+def projected_cauchy_stress(elements: GrainElements, x: np.ndarray) -> np.ndarray:
+    """Cauchy stress sigma = P F^T / J at F_Pi, one constant tensor per grain (G, 3, 3)."""
+    Fs = np.ascontiguousarray(projected_deformation_gradients(elements, x))
+    out = np.empty_like(Fs)
+    _cauchy(Fs, elements.mu, elements.kappa, out)
+    return out

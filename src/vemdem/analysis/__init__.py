@@ -1,0 +1,1 @@
+"""Closed-form references, measurements and plots."""

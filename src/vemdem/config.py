@@ -1,0 +1,118 @@
+"""TOML configs, checked against a schema before anything runs.
+
+A bad config stops the run with one line naming the key and the problem (exit status 2):
+unknown keys, missing required keys, wrong types and impossible values.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+REQUIRED = object()
+
+
+class ConfigError(ValueError):
+    """A config problem; str(e) is the one line shown to the user."""
+
+
+@dataclass(frozen=True)
+class Field:
+    kind: type | tuple  # float, int, str, bool, list, or a tuple of allowed str values
+    default: Any = REQUIRED
+    check: Callable[[Any], str | None] | None = None  # returns a problem or None
+    doc: str = ""
+
+
+def positive(v):
+    return None if v > 0 else "must be > 0"
+
+
+def non_negative(v):
+    return None if v >= 0 else "must be >= 0"
+
+
+def unit_interval(v):
+    return None if 0 <= v <= 1 else "must be in [0, 1]"
+
+
+def open_unit_interval(v):
+    return None if 0 < v < 1 else "must be in (0, 1)"
+
+
+def poisson(v):
+    return None if -1 < v < 0.5 else "must be in (-1, 0.5) (nu >= 0.5 is incompressible)"
+
+
+def vector3(v):
+    return None if len(v) == 3 and all(isinstance(c, (int, float)) and math.isfinite(c) for c in v) else (
+        "must be a list of 3 finite numbers"
+    )
+
+
+def _type_name(kind) -> str:
+    if isinstance(kind, tuple):
+        return "one of " + ", ".join(repr(k) for k in kind)
+    return {float: "a number", int: "an integer", str: "a string", bool: "true or false", list: "a list"}[kind]
+
+
+def _coerce(key: str, value, kind):
+    if isinstance(kind, tuple):
+        if value not in kind:
+            raise ConfigError(f"{key}: {value!r} is not {_type_name(kind)}")
+        return value
+    ok = {
+        float: isinstance(value, (int, float)) and not isinstance(value, bool),
+        int: isinstance(value, int) and not isinstance(value, bool),
+        str: isinstance(value, str),
+        bool: isinstance(value, bool),
+        list: isinstance(value, list),
+    }[kind]
+    if not ok:
+        raise ConfigError(f"{key}: expected {_type_name(kind)}, got {value!r}")
+    if kind is float:
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"{key}: must be finite, got {value!r}")
+    return value
+
+
+def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
+    """Check `data` against `schema` (nested dicts of Field) and fill defaults."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
+    unknown = sorted(set(data) - set(schema))
+    if unknown:
+        raise ConfigError(f"{prefix}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(schema))})")
+    out = {}
+    for key, spec in schema.items():
+        name = prefix + key
+        if isinstance(spec, dict):
+            out[key] = apply_schema(data.get(key, {}), spec, name + ".")
+            continue
+        if key not in data:
+            if spec.default is REQUIRED:
+                raise ConfigError(f"{name}: required key is missing")
+            out[key] = spec.default
+            continue
+        value = _coerce(name, data[key], spec.kind)
+        if spec.check is not None:
+            problem = spec.check(value)
+            if problem:
+                raise ConfigError(f"{name}: {problem}, got {value!r}")
+        out[key] = value
+    return out
+
+
+def load_toml(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None

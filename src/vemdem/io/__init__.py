@@ -1,0 +1,1 @@
+"""Writers: CSV, JSON summaries, ParaView series, checkpoints."""

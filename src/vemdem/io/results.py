@@ -1,0 +1,53 @@
+"""Small result writers shared by scenarios: CSV rows written as they come, JSON summaries."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+class CsvLog:
+    """A CSV file with a fixed header, flushed after every row so an interrupted run keeps
+    everything it computed."""
+
+    def __init__(self, path: Path, header: list[str]):
+        self.path = Path(path)
+        self._fh = self.path.open("w", newline="")
+        self._writer = csv.writer(self._fh)
+        self._writer.writerow(header)
+        self._fh.flush()
+
+    def write(self, *row) -> None:
+        self._writer.writerow([_plain(v) for v in row])
+        self._fh.flush()
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _plain(v):
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def write_json(path: Path, data: dict) -> None:
+    def default(o):
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        raise TypeError(f"not JSON serialisable: {type(o)}")
+
+    Path(path).write_text(json.dumps(data, indent=2, default=default) + "\n")

@@ -1,0 +1,35 @@
+"""Scenario names (a contract: `scenario = "..."` in the config) -> schema and run function."""
+
+from __future__ import annotations
+
+from importlib import import_module
+from importlib.resources import files
+
+from ..config import ConfigError, apply_schema
+
+SCENARIOS = {
+    "grain_compression": "vemdem.scenarios.grain_compression",
+}
+
+EXAMPLES = {
+    "grain_compression": "grain_compression.toml",
+}
+
+
+def scenario_module(name):
+    if name not in SCENARIOS:
+        raise ConfigError(f"scenario: unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+    return import_module(SCENARIOS[name])
+
+
+def checked_config(raw: dict) -> tuple[dict, object]:
+    if "scenario" not in raw:
+        raise ConfigError("scenario: required key is missing")
+    module = scenario_module(raw["scenario"])
+    return apply_schema(raw, module.SCHEMA), module
+
+
+def example_text(name: str) -> str:
+    if name not in EXAMPLES:
+        raise ConfigError(f"example: unknown example {name!r} (known: {', '.join(EXAMPLES)})")
+    return files("vemdem").joinpath("examples", EXAMPLES[name]).read_text()

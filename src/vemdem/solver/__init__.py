@@ -1,0 +1,1 @@
+"""Time integrators, Newton's method and linear solvers."""
