@@ -17,5 +17,14 @@ from .polyhedron import (
     Polyhedron,
     UnusedVertexError,
 )
-from .shapes import cube, hull_polyhedron, l_prism, rotation_matrix, sand_grain, tetrahedron
+from .shapes import (
+    cube,
+    extruded_polygon,
+    hull_polyhedron,
+    l_prism,
+    rotation_matrix,
+    sand_grain,
+    tetrahedron,
+    u_prism,
+)
 from .submesh import SubMesh, SubMeshError, build_submesh, check_submesh

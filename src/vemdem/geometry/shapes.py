@@ -36,20 +36,55 @@ def tetrahedron(vertices=None) -> Polyhedron:
     return Polyhedron(vertices, f, "tetrahedron")
 
 
-def l_prism(size: float = 1.0, height: float = 0.5) -> Polyhedron:
-    """An L-shaped prism: a non-convex grain with three concave edges meeting the reflex corner."""
-    outline = size * 0.5 * np.array([[0.0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]])
+def _ear_clip(outline: np.ndarray) -> np.ndarray:
+    """Triangles of a simple counter-clockwise polygon (ear clipping, O(n^2): caps are small)."""
+    idx = list(range(len(outline)))
+    tris = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    while len(idx) > 3:
+        for k in range(len(idx)):
+            i, j, m = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = outline[i], outline[j], outline[m]
+            if cross(a, b, c) <= 0:
+                continue  # reflex or flat corner
+            others = [outline[q] for q in idx if q not in (i, j, m)]
+            if any(cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0 for p in others):
+                continue
+            tris.append((i, j, m))
+            idx.pop(k)
+            break
+        else:
+            raise GeometryError("polygon outline is not simple or not counter-clockwise")
+    tris.append(tuple(idx))
+    return np.array(tris)
+
+
+def extruded_polygon(outline, height: float, name: str = "prism") -> Polyhedron:
+    """A prism over a simple counter-clockwise polygon (convex or not), centred on its vertex average."""
+    outline = np.asarray(outline, float)
     n = len(outline)
-    bottom = np.column_stack([outline, np.zeros(n)])
-    top = np.column_stack([outline, np.full(n, height)])
-    caps = np.array([[3, 4, 5], [3, 5, 0], [3, 0, 1], [3, 1, 2]])  # fan from the reflex corner
-    faces = [caps[:, ::-1], caps + n]
+    caps = _ear_clip(outline)
+    faces = [caps[:, ::-1], caps + n]  # bottom faces down, top faces up
     for i in range(n):
         j = (i + 1) % n
         faces.append([[i, j, j + n], [i, j + n, i + n]])
-    faces = np.vstack(faces)
-    vertices = np.vstack([bottom, top])
-    return Polyhedron(vertices - vertices.mean(axis=0), faces, "L-prism")
+    vertices = np.vstack([np.column_stack([outline, np.zeros(n)]), np.column_stack([outline, np.full(n, height)])])
+    return Polyhedron(vertices - vertices.mean(axis=0), np.vstack(faces), name)
+
+
+def l_prism(size: float = 1.0, height: float = 0.5) -> Polyhedron:
+    """An L-shaped prism: non-convex (one concave edge), star-shaped about its inner corner square."""
+    outline = size * 0.5 * np.array([[0.0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]])
+    return extruded_polygon(outline, height, "L-prism")
+
+
+def u_prism(size: float = 1.0, height: float = 0.5) -> Polyhedron:
+    """A U-shaped prism: non-convex and not star-shaped (its kernel is empty)."""
+    outline = size / 3.0 * np.array([[0.0, 0], [3, 0], [3, 3], [2, 3], [2, 1], [1, 1], [1, 3], [0, 3]])
+    return extruded_polygon(outline, height, "U-prism")
 
 
 def hull_polyhedron(points: np.ndarray, name: str = "hull") -> Polyhedron:

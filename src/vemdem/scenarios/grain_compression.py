@@ -39,8 +39,12 @@ MATERIAL_SCHEMA = {
     "density": Field(float, 2200.0, positive, "kg/m^3"),
 }
 
+def stabilised(v):
+    return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the element without stabilisation: singular stiffness)"
+
+
 VEM_SCHEMA = {
-    "beta_internal": Field(float, 0.5, unit_interval, "beta_i of paper eq. 8"),
+    "beta_internal": Field(float, 0.5, stabilised, "beta_i of paper eq. 8"),
     "beta_mass": Field(float, 1.0, unit_interval, "beta_d of paper eq. 8"),
     "beta_load": Field(float, 1.0, unit_interval, "beta_e of paper eq. 8"),
     "submesh": Field(METHODS, "auto", doc="stabilisation sub-mesh"),
@@ -126,6 +130,8 @@ def prepare_grain(grain, mode: str):
 
 def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -> dict:
     t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
     mode = cfg["loading"]["mode"]
     grain = make_grain(cfg["grain"], base_dir, truncate=True)
     grain, pins = prepare_grain(grain, mode)

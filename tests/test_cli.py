@@ -1,0 +1,107 @@
+"""The command line: `vemdem run`, `vemdem example`, and config errors (exit status 2)."""
+
+import json
+import subprocess
+import sys
+import tomllib
+
+import pytest
+
+from vemdem.cli import main
+from vemdem.scenarios.registry import EXAMPLES, example_text
+
+GOOD = """
+scenario = "grain_compression"
+[material]
+E = 90e9
+nu = 0.16
+density = 2200.0
+[vem]
+beta_internal = 0.5
+[grain]
+shape = "cube"
+size = 1.45e-3
+[loading]
+mode = "uniaxial"
+max_strain = 0.3
+steps = 3
+"""
+
+
+def write(tmp_path, text):
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    return path
+
+
+def run_cli(capsys, *args):
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_run_writes_results(tmp_path, capsys):
+    code, out, _ = run_cli(capsys, "run", write(tmp_path, GOOD), "--out", tmp_path / "out", "--quiet")
+    assert code == 0
+    summary = json.loads((tmp_path / "out/summary.json").read_text())
+    assert summary["scenario"] == "grain_compression" and summary["n_steps"] == 3
+    assert (tmp_path / "out/force_strain.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    "edit,key,problem",
+    [
+        (("nu = 0.16", "nu = 0.5"), "material.nu", "must be in (-1, 0.5)"),
+        (("E = 90e9", "E = -1.0"), "material.E", "must be > 0"),
+        (("E = 90e9", 'E = "stiff"'), "material.E", "expected a number"),
+        (("max_strain = 0.3", "max_strain = 1.0"), "loading.max_strain", "must be in (0, 1)"),
+        (("steps = 3", "steps = 2.5"), "loading.steps", "expected an integer"),
+        (("mode = \"uniaxial\"", "mode = \"biaxial\""), "loading.mode", "is not one of"),
+        (("size = 1.45e-3", "size = 1.45e-3\ncolour = 3"), "grain.colour", "unknown key"),
+        (("E = 90e9\n", ""), "material.E", "required key is missing"),
+        (('scenario = "grain_compression"', 'scenario = "avalanche"'), "scenario", "unknown scenario"),
+        (("beta_internal = 0.5", "beta_internal = 0.0"), "vem.beta_internal", "must be in (0, 1]"),
+        (("[loading]", "[loading\n"), "job.toml", "not valid TOML"),
+    ],
+)
+def test_bad_config_stops_before_running_with_exit_2(tmp_path, capsys, edit, key, problem):
+    code, out, err = run_cli(capsys, "run", write(tmp_path, GOOD.replace(*edit)), "--out", tmp_path / "out")
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert key in lines[0] and problem in lines[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_grain_file_is_a_config_error(tmp_path, capsys):
+    text = GOOD.replace('shape = "cube"', 'file = "nowhere.stl"')
+    code, _, err = run_cli(capsys, "run", write(tmp_path, text), "--out", tmp_path / "out")
+    assert code == 2 and "nowhere.stl" in err and "not found" in err
+
+
+def test_missing_config_file(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "run", tmp_path / "none.toml", "--out", tmp_path / "out")
+    assert code == 2 and "config file not found" in err
+
+
+@pytest.mark.parametrize("name", list(EXAMPLES))
+def test_examples_are_valid_configs(name, capsys):
+    code, out, _ = run_cli(capsys, "example", name)
+    assert code == 0 and out == example_text(name)
+    from vemdem.scenarios.registry import checked_config
+
+    cfg, _ = checked_config(tomllib.loads(out))
+    assert cfg["scenario"]
+
+
+def test_example_lists_names_and_rejects_unknown(capsys):
+    code, out, _ = run_cli(capsys, "example")
+    assert code == 0 and "grain_compression" in out.split()
+    code, _, err = run_cli(capsys, "example", "nope")
+    assert code == 2 and "unknown example" in err
+
+
+def test_console_script_is_installed(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "vemdem.cli", "example", "grain_compression"],
+                          capture_output=True, text=True)  # fmt: skip
+    assert proc.returncode == 0 and "grain_compression" in proc.stdout
