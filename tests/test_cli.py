@@ -105,3 +105,13 @@ def test_console_script_is_installed(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "vemdem.cli", "example", "grain_compression"],
                           capture_output=True, text=True)  # fmt: skip
     assert proc.returncode == 0 and "grain_compression" in proc.stdout
+
+
+def test_failed_run_exits_1_and_keeps_what_it_wrote(tmp_path, capsys):
+    text = GOOD.replace("max_strain = 0.3", "max_strain = 0.95").replace("steps = 3", "steps = 2")
+    text = text.replace("[loading]", "[solver]\nmax_iterations = 5\n[loading]")
+    code, _, err = run_cli(capsys, "run", write(tmp_path, text), "--out", tmp_path / "out", "--quiet")
+    assert code == 1
+    assert "Newton did not converge" in err and str(tmp_path / "out") in err
+    rows = (tmp_path / "out/force_strain.csv").read_text().splitlines()
+    assert rows[0] == "strain,force" and len(rows) >= 2

@@ -1,0 +1,184 @@
+"""Local Contact Problems of paper eq. 9-11 in their degenerate forms, in closed form.
+
+Every contact pair is a small element over at most 6 vertices (3 on each side). Its gap vector
+is affine in the convective coordinates c (m <= 2 of them on each side, 0 to 4 in all):
+
+    g(x, c) = sum_i w_i(c) x_i,   w(c) = w0 + D c   (w > 0 on side A, w < 0 on side B)
+
+    vertex-face   A: p            B: (1-u-v) t0 + u t1 + v t2          c = (u, v)
+    edge-edge     A: (1-s) a0 + s a1     B: (1-t) b0 + t b1            c = (s, t)
+    vertex-edge   A: p            B: (1-t) e0 + t e1                   c = (t)
+    vertex-vertex A: p            B: q                                 c = ()
+
+The LCP (eq. 11) is stationarity of q = |g|^2 in c; for flat triangles and straight edges it is
+linear, solved here in closed form. A pair is *in range* when c lies strictly inside its features
+(open triangle, open edge); the pair's gap is then the distance between the two features.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+VERTEX_FACE, EDGE_EDGE, VERTEX_EDGE, VERTEX_VERTEX = 0, 1, 2, 3
+PAIR_NAMES = ("vertex-face", "edge-edge", "vertex-edge", "vertex-vertex")
+N_NODES = (4, 4, 3, 2)
+N_COORDS = (2, 2, 1, 0)
+
+# Edges closer to parallel than this (squared sine of their angle) have no isolated closest
+# point pair; their contact is carried by the vertex-edge pairs at the ends of their overlap.
+PARALLEL_SIN2 = 1e-10
+# A coordinate counts as inside its feature when it is this far (relative) from the boundary;
+# points closer to an edge or vertex belong to that lower-dimensional feature's pair.
+RANGE_TOL = 1e-12
+
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def vertex_face_lcp(p, t0, t1, t2):
+    """(in_range, u, v): closest point of the plane of the triangle to p, barycentric u, v."""
+    e1 = t1 - t0
+    e2 = t2 - t0
+    r = p - t0
+    a11 = _dot(e1, e1)
+    a12 = _dot(e1, e2)
+    a22 = _dot(e2, e2)
+    b1 = _dot(r, e1)
+    b2 = _dot(r, e2)
+    det = a11 * a22 - a12 * a12
+    if det <= 0.0:
+        return False, 0.0, 0.0
+    u = (b1 * a22 - b2 * a12) / det
+    v = (b2 * a11 - b1 * a12) / det
+    ok = u > RANGE_TOL and v > RANGE_TOL and u + v < 1.0 - RANGE_TOL
+    return ok, u, v
+
+
+@njit(cache=True)
+def vertex_edge_lcp(p, e0, e1):
+    """(in_range, t): closest point of the line through the edge to p."""
+    d = e1 - e0
+    dd = _dot(d, d)
+    if dd <= 0.0:
+        return False, 0.0
+    t = _dot(p - e0, d) / dd
+    return RANGE_TOL < t < 1.0 - RANGE_TOL, t
+
+
+@njit(cache=True)
+def edge_edge_lcp(a0, a1, b0, b1):
+    """(in_range, s, t): closest points of the two lines; never in range for (nearly) parallel edges."""
+    da = a1 - a0
+    db = b1 - b0
+    r = a0 - b0
+    aa = _dot(da, da)
+    bb = _dot(db, db)
+    ab = _dot(da, db)
+    det = aa * bb - ab * ab
+    if det <= PARALLEL_SIN2 * aa * bb:
+        return False, 0.0, 0.0
+    ra = _dot(r, da)
+    rb = _dot(r, db)
+    s = (ab * rb - bb * ra) / det
+    t = (aa * rb - ab * ra) / det
+    ok = RANGE_TOL < s < 1.0 - RANGE_TOL and RANGE_TOL < t < 1.0 - RANGE_TOL
+    return ok, s, t
+
+
+@njit(cache=True)
+def pair_weights(kind, c0, c1, w0, D):
+    """Fill w0 (6,) and D (6, 2) so that w(c) = w0 + D c for the pair kind; returns w(c)."""
+    w0[:] = 0.0
+    D[:, :] = 0.0
+    if kind == VERTEX_FACE:
+        w0[0] = 1.0
+        w0[1] = -1.0
+        D[1, 0] = 1.0
+        D[1, 1] = 1.0
+        D[2, 0] = -1.0
+        D[3, 1] = -1.0
+    elif kind == EDGE_EDGE:
+        w0[0] = 1.0
+        w0[2] = -1.0
+        D[0, 0] = -1.0
+        D[1, 0] = 1.0
+        D[2, 1] = 1.0
+        D[3, 1] = -1.0
+    elif kind == VERTEX_EDGE:
+        w0[0] = 1.0
+        w0[1] = -1.0
+        D[1, 0] = 1.0
+        D[2, 0] = -1.0
+    else:
+        w0[0] = 1.0
+        w0[1] = -1.0
+    w = np.empty(6)
+    for i in range(6):
+        w[i] = w0[i] + D[i, 0] * c0 + D[i, 1] * c1
+    return w
+
+
+@njit(cache=True)
+def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
+    """Gap d = |g| of an in-range pair and its exact derivatives in the pair's node positions.
+
+    xs (6, 3): node positions in the pair's order. Because c solves the LCP, grad d = n (x) w
+    (the change of c does not enter to first order). The Hessian includes it through the Schur
+    complement of q = |g|^2 (formulation.md 4.6: dc/dx = -H_cc^-1 d2q/dc dx):
+
+        d2q/dx2 = 2 (w w^T) (x) I,   H_cc = 2 J^T J,   d2q/dx_i dc_k = 2 (D_ik g + w_i J_k),
+        hess q  = d2q/dx2 - B H_cc^-1 B^T,   hess d = hess q / (2 d) - grad q grad q^T / (4 d^3).
+    """
+    nn = N_NODES[kind]
+    m = N_COORDS[kind]
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    w = pair_weights(kind, c0, c1, w0, D)
+    g = np.zeros(3)
+    for i in range(nn):
+        for a in range(3):
+            g[a] += w[i] * xs[i, a]
+    d = np.sqrt(_dot(g, g))
+    grad[:, :] = 0.0
+    if d <= 0.0:
+        return 0.0
+    for i in range(nn):
+        for a in range(3):
+            grad[i, a] = w[i] * g[a] / d
+    if not want_hessian:
+        return d
+    n3 = 3 * nn
+    hq = np.zeros((n3, n3))
+    for i in range(nn):
+        for j in range(nn):
+            for a in range(3):
+                hq[3 * i + a, 3 * j + a] = 2.0 * w[i] * w[j]
+    if m > 0:
+        J = np.zeros((3, 2))
+        for k in range(m):
+            for i in range(nn):
+                for a in range(3):
+                    J[a, k] += D[i, k] * xs[i, a]
+        H = np.zeros((m, m))
+        for k in range(m):
+            for l in range(m):
+                H[k, l] = 2.0 * _dot(J[:, k], J[:, l])
+        Hinv = np.linalg.inv(H)
+        B = np.zeros((n3, m))
+        for i in range(nn):
+            for a in range(3):
+                for k in range(m):
+                    B[3 * i + a, k] = 2.0 * (D[i, k] * g[a] + w[i] * J[a, k])
+        hq -= B @ Hinv @ B.T
+    gq = np.empty(n3)
+    for i in range(nn):
+        for a in range(3):
+            gq[3 * i + a] = 2.0 * w[i] * g[a]
+    for r in range(n3):
+        for s in range(n3):
+            hess[r, s] = hq[r, s] / (2.0 * d) - gq[r] * gq[s] / (4.0 * d * d * d)
+    return d
