@@ -1,0 +1,266 @@
+"""Narrow phase between two grains: eligible contact pairs and the hierarchy (formulation.md 4.2-4.4).
+
+For a pair of grains (A, B) whose inflated boxes overlap, the features of each grain that reach
+into the other's box (inflated by the activation gap) are tested pairwise:
+
+    vertex-face   LCP in range, vertex on the outer side of the face, gap <= gbar
+    edge-edge     LCP in range (never for parallel edges), gap <= gbar; flat edges (the
+                  diagonals of planar regions) are skipped: a crossing there is already carried
+                  by the vertex-face pairs of the planar region
+    vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
+                  eligible vertex-face pair with either face at the edge, a concave edge only to
+                  both; and to two or more eligible edge-edge pairs between the edge and edges at
+                  the vertex
+    vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
+                  at the other one
+
+so one physical touching point is counted once. Candidates are found by boxes, not all pairs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .narrow import (
+    EDGE_EDGE,
+    VERTEX_EDGE,
+    VERTEX_FACE,
+    VERTEX_VERTEX,
+    edge_edge_lcp,
+    vertex_edge_lcp,
+    vertex_face_lcp,
+)
+from .topology import CONCAVE, FLAT
+
+# columns of the integer contact record
+KIND, GRAIN_A, GRAIN_B, FEATURE_A, FEATURE_B, NODE0 = 0, 1, 2, 3, 4, 5
+INT_COLS = NODE0 + 6
+# columns of the float contact record
+C0, C1, GAP = 0, 1, 2
+FLOAT_COLS = 3
+
+
+@njit(cache=True)
+def _norm(v):
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@njit(cache=True)
+def _vf_gap(x, p, f, faces, gbar):
+    """Gap of vertex p against face f if the pair is eligible, else -1."""
+    t0 = x[faces[f, 0]]
+    t1 = x[faces[f, 1]]
+    t2 = x[faces[f, 2]]
+    ok, u, v = vertex_face_lcp(x[p], t0, t1, t2)
+    if not ok:
+        return -1.0, u, v
+    e1 = t1 - t0
+    e2 = t2 - t0
+    n = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
+    r = x[p] - t0
+    side = r[0] * n[0] + r[1] * n[1] + r[2] * n[2]
+    if side <= 0.0:
+        return -1.0, u, v
+    g = x[p] - (1.0 - u - v) * t0 - u * t1 - v * t2
+    d = _norm(g)
+    if d > gbar:
+        return -1.0, u, v
+    return d, u, v
+
+
+@njit(cache=True)
+def _ve_gap(x, p, e, edges, gbar):
+    e0 = x[edges[e, 0]]
+    e1 = x[edges[e, 1]]
+    ok, t = vertex_edge_lcp(x[p], e0, e1)
+    if not ok:
+        return -1.0, t
+    d = _norm(x[p] - (1.0 - t) * e0 - t * e1)
+    return (d if d <= gbar else -1.0), t
+
+
+@njit(cache=True)
+def _ee_gap(x, ea, eb, edges, edge_type, gbar):
+    if edge_type[ea] == FLAT or edge_type[eb] == FLAT:
+        return -1.0, 0.0, 0.0
+    a0 = x[edges[ea, 0]]
+    a1 = x[edges[ea, 1]]
+    b0 = x[edges[eb, 0]]
+    b1 = x[edges[eb, 1]]
+    ok, s, t = edge_edge_lcp(a0, a1, b0, b1)
+    if not ok:
+        return -1.0, s, t
+    d = _norm((1.0 - s) * a0 + s * a1 - (1.0 - t) * b0 - t * b1)
+    return (d if d <= gbar else -1.0), s, t
+
+
+@njit(cache=True)
+def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar):
+    fa = edge_faces[e, 0]
+    fb = edge_faces[e, 1]
+    ca = _vf_gap(x, p, fa, faces, gbar)[0] >= 0.0
+    cb = _vf_gap(x, p, fb, faces, gbar)[0] >= 0.0
+    if edge_type[e] == CONCAVE:
+        if ca and cb:
+            return False
+    elif ca or cb:
+        return False
+    linked = 0
+    for k in range(v_edge_ptr[p], v_edge_ptr[p + 1]):
+        if _ee_gap(x, v_edges[k], e, edges, edge_type, gbar)[0] >= 0.0:
+            linked += 1
+    return linked < 2
+
+
+@njit(cache=True)
+def _vertex_vertex_survives(x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar):
+    for a, b in ((p, q), (q, p)):
+        for k in range(v_face_ptr[b], v_face_ptr[b + 1]):
+            if _vf_gap(x, a, v_faces[k], faces, gbar)[0] >= 0.0:
+                return False
+        for k in range(v_edge_ptr[b], v_edge_ptr[b + 1]):
+            if _ve_gap(x, a, v_edges[k], edges, gbar)[0] >= 0.0:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _box(x, v0, v1):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for v in range(v0, v1):
+        for a in range(3):
+            lo[a] = min(lo[a], x[v, a])
+            hi[a] = max(hi[a], x[v, a])
+    return lo, hi
+
+
+@njit(cache=True)
+def _in_box(x, nodes, lo, hi):
+    """Does the box of the nodes' points meet the box [lo, hi]?"""
+    for a in range(3):
+        mn = np.inf
+        mx = -np.inf
+        for v in nodes:
+            mn = min(mn, x[v, a])
+            mx = max(mx, x[v, a])
+        if mx < lo[a] or mn > hi[a]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _region(x, A, B, vptr, gbar):
+    """Part of grain A's box that lies within gbar of grain B's box."""
+    loA, hiA = _box(x, vptr[A], vptr[A + 1])
+    loB, hiB = _box(x, vptr[B], vptr[B + 1])
+    lo = np.maximum(loA, loB - gbar)
+    hi = np.minimum(hiA, hiB + gbar)
+    return lo, hi
+
+
+@njit(cache=True)
+def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges):
+    vs = [v for v in range(vptr[A], vptr[A + 1]) if _in_box(x, np.array([v]), lo, hi)]
+    fs = [f for f in range(fptr[A], fptr[A + 1]) if _in_box(x, faces[f], lo, hi)]
+    es = [e for e in range(eptr[A], eptr[A + 1]) if _in_box(x, edges[e], lo, hi)]
+    return np.array(vs, dtype=np.int64), np.array(fs, dtype=np.int64), np.array(es, dtype=np.int64)
+
+
+@njit(cache=True)
+def _record(ints, floats, n, cap, kind, A, B, fa, fb, nodes, c0, c1, gap):
+    if n < cap:
+        ints[n, KIND] = kind
+        ints[n, GRAIN_A] = A
+        ints[n, GRAIN_B] = B
+        ints[n, FEATURE_A] = fa
+        ints[n, FEATURE_B] = fb
+        for k in range(6):
+            ints[n, NODE0 + k] = nodes[k] if k < len(nodes) else -1
+        floats[n, C0] = c0
+        floats[n, C1] = c1
+        floats[n, GAP] = gap
+    return n + 1
+
+
+@njit(cache=True)
+def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, ints, floats):  # fmt: skip
+    """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
+    Returns the number found (which may exceed the capacity: then the caller retries)."""
+    cap = len(ints)
+    n = 0
+    loA, hiA = _region(x, A, B, vptr, gbar)
+    loB, hiB = _region(x, B, A, vptr, gbar)
+    vA, fA, eA = _features_near(x, A, loA, hiA, vptr, fptr, eptr, faces, edges)
+    vB, fB, eB = _features_near(x, B, loB, hiB, vptr, fptr, eptr, faces, edges)
+    # vertex-face, both ways: the vertex's grain is side "A" of the record
+    for side in range(2):
+        verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)
+        for p in verts:
+            for f in fcs:
+                d, u, v = _vf_gap(x, p, f, faces, gbar)
+                if d >= 0.0:
+                    nodes = np.array([p, faces[f, 0], faces[f, 1], faces[f, 2]])
+                    n = _record(ints, floats, n, cap, VERTEX_FACE, ga, gb, p, f, nodes, u, v, d)
+    for ea in eA:
+        for eb in eB:
+            d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
+            if d >= 0.0:
+                nodes = np.array([edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]])
+                n = _record(ints, floats, n, cap, EDGE_EDGE, A, B, ea, eb, nodes, s, t, d)
+    for side in range(2):
+        verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
+        for p in verts:
+            for e in eds:
+                d, t = _ve_gap(x, p, e, edges, gbar)
+                if d >= 0.0 and _vertex_edge_survives(
+                    x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar
+                ):
+                    nodes = np.array([p, edges[e, 0], edges[e, 1]])
+                    n = _record(ints, floats, n, cap, VERTEX_EDGE, ga, gb, p, e, nodes, t, 0.0, d)
+    for p in vA:
+        for q in vB:
+            d = _norm(x[p] - x[q])
+            if d <= gbar and _vertex_vertex_survives(
+                x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar
+            ):
+                n = _record(ints, floats, n, cap, VERTEX_VERTEX, A, B, p, q, np.array([p, q]), 0.0, 0.0, d)
+    return n
+
+
+@njit(parallel=True, cache=True)
+def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
+               v_face_ptr, v_faces, v_edge_ptr, v_edges, cap, ints, floats, counts):  # fmt: skip
+    for k in prange(len(grain_pairs)):
+        counts[k] = grain_pair_contacts(
+            x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
+            edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges,
+            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
+        )  # fmt: skip
+
+
+def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
+    """Eligible contact pairs of the candidate grain pairs, as (ints, floats) record arrays.
+
+    Each grain pair gets `capacity` slots; when one overflows, the search is rerun with room
+    for the largest count (fixed-capacity buffers keep the compiled kernel free of Python lists).
+    """
+    grain_pairs = np.ascontiguousarray(grain_pairs, dtype=np.int64).reshape(-1, 2)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    while True:
+        m = len(grain_pairs)
+        ints = np.empty((m * capacity, INT_COLS), dtype=np.int64)
+        floats = np.empty((m * capacity, FLOAT_COLS))
+        counts = np.zeros(m, dtype=np.int64)
+        _all_pairs(
+            x, grain_pairs, gbar, topo.grain_vertex_ptr, topo.grain_face_ptr, topo.grain_edge_ptr, topo.faces,
+            topo.edges, topo.edge_faces, topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces,
+            topo.vertex_edge_ptr, topo.vertex_edges, capacity, ints, floats, counts,
+        )  # fmt: skip
+        if m == 0 or counts.max() <= capacity:
+            break
+        capacity = int(counts.max())
+    keep = (np.arange(capacity)[None, :] < counts[:, None]).ravel()
+    return ints[keep], floats[keep]
