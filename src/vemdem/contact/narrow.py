@@ -182,3 +182,64 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
         for s in range(n3):
             hess[r, s] = hq[r, s] / (2.0 * d) - gq[r] * gq[s] / (4.0 * d * d * d)
     return d
+
+
+# Closest feature pairs assembled from the degenerate LCPs. The feature codes follow the IPC
+# Toolkit's distance types so that tests can compare with it directly.
+PT_T0, PT_T1, PT_T2, PT_E0, PT_E1, PT_E2, PT_T = range(7)  # point-triangle
+EE_A0B0, EE_A0B1, EE_A1B0, EE_A1B1, EE_A_B0, EE_A_B1, EE_A0_B, EE_A1_B, EE_A_B = range(9)
+
+
+@njit(cache=True)
+def _point_edge_candidate(p, e0, e1, code, best_type, best):
+    ok, t = vertex_edge_lcp(p, e0, e1)
+    if ok:
+        d = _norm3(p - (1.0 - t) * e0 - t * e1)
+        if d < best:
+            return code, d
+    return best_type, best
+
+
+@njit(cache=True)
+def _point_point_candidate(p, q, code, best_type, best):
+    d = _norm3(p - q)
+    if d < best:
+        return code, d
+    return best_type, best
+
+
+@njit(cache=True)
+def point_triangle_closest(p, t0, t1, t2):
+    """(type, distance) of a point and a triangle: the face LCP if in range, else the best
+    in-range edge LCP, else the nearest vertex."""
+    ok, u, v = vertex_face_lcp(p, t0, t1, t2)
+    if ok:
+        return PT_T, _norm3(p - (1.0 - u - v) * t0 - u * t1 - v * t2)
+    k, d = _point_point_candidate(p, t0, PT_T0, -1, np.inf)
+    k, d = _point_point_candidate(p, t1, PT_T1, k, d)
+    k, d = _point_point_candidate(p, t2, PT_T2, k, d)
+    k, d = _point_edge_candidate(p, t0, t1, PT_E0, k, d)
+    k, d = _point_edge_candidate(p, t1, t2, PT_E1, k, d)
+    return _point_edge_candidate(p, t2, t0, PT_E2, k, d)
+
+
+@njit(cache=True)
+def edge_edge_closest(a0, a1, b0, b1):
+    """(type, distance) of two segments: the edge-edge LCP if in range, else the best vertex-edge
+    LCP, else the nearest vertex pair (parallel edges end up in the latter two)."""
+    ok, s, t = edge_edge_lcp(a0, a1, b0, b1)
+    if ok:
+        return EE_A_B, _norm3((1.0 - s) * a0 + s * a1 - (1.0 - t) * b0 - t * b1)
+    k, d = _point_point_candidate(a0, b0, EE_A0B0, -1, np.inf)
+    k, d = _point_point_candidate(a0, b1, EE_A0B1, k, d)
+    k, d = _point_point_candidate(a1, b0, EE_A1B0, k, d)
+    k, d = _point_point_candidate(a1, b1, EE_A1B1, k, d)
+    k, d = _point_edge_candidate(b0, a0, a1, EE_A_B0, k, d)
+    k, d = _point_edge_candidate(b1, a0, a1, EE_A_B1, k, d)
+    k, d = _point_edge_candidate(a0, b0, b1, EE_A0_B, k, d)
+    return _point_edge_candidate(a1, b0, b1, EE_A1_B, k, d)
+
+
+@njit(cache=True)
+def _norm3(v):
+    return np.sqrt(_dot(v, v))

@@ -1,0 +1,66 @@
+"""Normal interface law (formulation.md section 1): fixture values, continuity, potential, stiffness."""
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from vemdem.contact.law import InterfaceLaw, normal_force, normal_potential
+
+# The GIRAFFE manual's syntax example: EPN1 1e8, N1 2, N2 -2, GNB 2e-4, Factor 0.3
+MANUAL = InterfaceLaw(activation_gap=2e-4, penalty=1e8, penalty_exponent=2, switch_factor=0.3, barrier_exponent=-2)
+
+
+def test_fixture_values():
+    p = MANUAL.packed()
+    assert MANUAL.switch_gap == pytest.approx(6e-5)
+    assert p[4] == pytest.approx(3.024e-9, rel=1e-12)  # eps2
+    assert p[6] == pytest.approx(1.12, rel=1e-12)  # c2
+    for g, f in [(1.5e-4, 0.25), (1e-4, 1.0), (6e-5, 1.96), (3e-5, 4.48), (1e-5, 31.36), (1e-6, 3025.12)]:
+        assert normal_force(g, p)[0] == pytest.approx(f, rel=1e-12)
+    assert normal_force(6e-5, p)[1] == pytest.approx(2.8e4, rel=1e-12)
+    assert normal_potential(6e-5, p) == pytest.approx(9.14666666e-5, rel=1e-8)
+
+
+@pytest.mark.parametrize("law", [MANUAL, InterfaceLaw(2e-5, 3e9, 2.5, 0.2, -3.0), InterfaceLaw(1.0, 1.0, 1.0, 0.5, -1.5)])
+def test_continuity_at_switch_gap(law):
+    p = law.packed()
+    gbb = law.switch_gap
+    h = 1e-9 * gbb
+    f_lo, k_lo = normal_force(gbb - h, p)
+    f_hi, k_hi = normal_force(gbb + h, p)
+    assert f_lo == pytest.approx(f_hi, rel=1e-7)  # C0
+    assert k_lo == pytest.approx(k_hi, rel=1e-6)  # C1
+    assert normal_force(law.activation_gap, p) == (0.0, 0.0)
+    assert normal_force(2 * law.activation_gap, p) == (0.0, 0.0)
+    assert normal_force(0.0, p)[0] == np.inf and normal_potential(0.0, p) == np.inf
+
+
+@pytest.mark.parametrize("law", [MANUAL, InterfaceLaw(2e-5, 3e9, 2.5, 0.2, -3.0)])
+def test_potential_is_the_integral_of_the_force(law):
+    p = law.packed()
+    gbar, gbb = law.activation_gap, law.switch_gap
+    for g in np.linspace(0.05 * gbar, 1.2 * gbar, 23):
+        pts = [gbb] if g < gbb else None
+        integral = quad(lambda s: normal_force(s, p)[0], g, max(g, gbar), points=pts, epsabs=0, epsrel=1e-12, limit=200)[0]
+        assert normal_potential(g, p) == pytest.approx(integral, rel=1e-9, abs=1e-300)
+
+
+@pytest.mark.parametrize("law", [MANUAL, InterfaceLaw(2e-5, 3e9, 2.5, 0.2, -3.0)])
+def test_stiffness_is_minus_the_derivative_of_the_force(law):
+    p = law.packed()
+    for g in np.linspace(0.05, 0.98, 31) * law.activation_gap:
+        h = 1e-7 * g
+        fd = -(normal_force(g + h, p)[0] - normal_force(g - h, p)[0]) / (2 * h)
+        assert normal_force(g, p)[1] == pytest.approx(fd, rel=1e-6)
+        dphi = (normal_potential(g + h, p) - normal_potential(g - h, p)) / (2 * h)
+        assert -dphi == pytest.approx(normal_force(g, p)[0], rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"activation_gap": 0.0}, {"penalty": -1.0}, {"switch_factor": 1.0}, {"barrier_exponent": -1.0}]
+)
+def test_bad_parameters(kwargs):
+    base = dict(activation_gap=1e-4, penalty=1e8)
+    base.update(kwargs)
+    with pytest.raises(ValueError, match="contact law"):
+        InterfaceLaw(**base)

@@ -1,0 +1,199 @@
+"""Grain-grain contact pairs: the hierarchy on flat contacts (issue 3 test 4), action = reaction
+(test 5), residual and tangent against finite differences of the potential (test 3), broad phase
+against brute force (test 7)."""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+from numba import njit
+
+from vemdem.contact.broad import brute_force_pairs, candidate_pairs
+from vemdem.contact.forces import evaluate_contacts
+from vemdem.contact.law import InterfaceLaw
+from vemdem.contact.narrow import PAIR_NAMES, edge_edge_closest, point_triangle_closest
+from vemdem.contact.pairs import find_contacts
+from vemdem.contact.topology import CONCAVE, CONVEX, FLAT, build_topology
+from vemdem.geometry import cube, l_prism, rotation_matrix, sand_grain
+
+GBAR = 0.05
+
+
+def scene(grains):
+    vptr = np.cumsum([0] + [g.n_vertices for g in grains])
+    X = np.vstack([g.vertices for g in grains])
+    return X, build_topology(X, [g.faces for g in grains], vptr)
+
+
+def pairs_of(grains, x=None):
+    X, topo = scene(grains)
+    x = X if x is None else x
+    ints, floats = find_contacts(x, candidate_pairs(x, topo.grain_vertex_ptr, GBAR), topo, GBAR)
+    return Counter(PAIR_NAMES[k] for k in ints[:, 0]), ints, floats, topo
+
+
+def test_edge_types():
+    _, topo = scene([cube(1.0), l_prism(1.0, 0.5)])
+    t = topo.edge_type
+    assert np.sum(t[topo.edge_grain == 0] == CONVEX) == 12 and np.sum(t[topo.edge_grain == 0] == FLAT) == 6
+    assert np.sum(t[topo.edge_grain == 1] == CONCAVE) == 1  # the vertical edge at the reflex corner
+
+
+def test_cube_on_smaller_offset_cube_gives_the_overlap_corners():
+    """Upper cube shifted by (0.3, 0.2): the overlap rectangle's corners are one vertex of each cube
+    over the other's face and two crossings of convex edges, gap 0.01 everywhere."""
+    counts, ints, floats, _ = pairs_of([cube(1.0), cube(1.0, center=(0.3, 0.2, 1.01))])
+    assert counts == Counter({"vertex-face": 2, "edge-edge": 2})
+    np.testing.assert_allclose(floats[:, 2], 0.01, rtol=1e-12)
+    points = np.array(sorted(tuple(np.round(p, 9)) for p in _contact_points(ints, floats, scene([cube(1.0), cube(1.0, center=(0.3, 0.2, 1.01))])[0])))
+    expected = sorted([(-0.2, -0.3), (0.5, 0.5), (-0.2, 0.5), (0.5, -0.3)])
+    np.testing.assert_allclose(points[:, :2], expected, atol=1e-9)
+
+
+def _contact_points(ints, floats, x):
+    """Point on side B of each pair (for the pictures in the tests)."""
+    from vemdem.contact.narrow import pair_weights
+
+    out = []
+    for row, fl in zip(ints, floats):
+        w = pair_weights(row[0], fl[0], fl[1], np.empty(6), np.empty((6, 2)))
+        nodes = row[5:11]
+        pB = sum(-w[i] * x[nodes[i]] for i in range(6) if nodes[i] >= 0 and w[i] < 0)
+        out.append(pB)
+    return np.array(out)
+
+
+def test_aligned_cubes_touch_at_four_vertex_pairs():
+    counts, *_ = pairs_of([cube(1.0), cube(1.0, center=(0, 0, 1.01))])
+    assert counts == Counter({"vertex-vertex": 4})
+
+
+def test_rotated_cube_on_cube_gives_eight_edge_crossings():
+    top = cube(1.0).rotated(rotation_matrix([0, 0, np.pi / 4])).translated((0, 0, 1.01))
+    counts, *_ = pairs_of([cube(1.0), top])
+    assert counts == Counter({"edge-edge": 8})
+
+
+def test_small_cube_on_large_cube():
+    """Corners over the face interior are vertex-face pairs; corners exactly over the large cube's
+    face diagonal (a flat edge) are vertex-edge pairs, found once, not twice."""
+    counts, *_ = pairs_of([cube(2.0), cube(1.0, center=(0, 0, 1.51))])
+    assert counts == Counter({"vertex-face": 2, "vertex-edge": 2})
+    counts, *_ = pairs_of([cube(2.0), cube(1.0, center=(0.1, 0.05, 1.51))])
+    assert counts == Counter({"vertex-face": 4})
+
+
+def test_cube_in_the_concave_corner_of_an_l_prism():
+    """A small cube resting in the L's inner corner touches both walls of the concave edge."""
+    L = l_prism(2.0, 1.0)  # outline corner at the origin after centring: reflex corner at (1, 1) - centre
+    reflex = L.vertices[3]  # bottom vertex at the reflex corner
+    c = cube(0.4).translated(reflex + np.array([0.2 + 0.01, 0.2 + 0.01, 0.5]))
+    counts, ints, floats, topo = pairs_of([L, c])
+    # the cube sits in the quadrant x > reflex, y > reflex: it faces the two walls of the notch
+    assert counts["vertex-face"] == 8  # four cube corners against each wall
+    assert counts["vertex-edge"] == 0 and counts["vertex-vertex"] == 0
+    np.testing.assert_allclose(floats[:, 2], 0.01, rtol=1e-9)
+
+
+def test_no_duplicate_pairs_on_random_grains(rng):
+    a = sand_grain(seed=1, size=1.0)
+    for seed in range(10):
+        R = rotation_matrix(rng.normal(size=3))
+        b = sand_grain(seed=100 + seed, size=1.0).rotated(R)
+        direction = rng.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        b = _place_at_gap(a, b, direction, 0.3 * GBAR)
+        counts, ints, _, _ = pairs_of([a, b])
+        keys = {tuple(r[:5]) for r in ints}
+        assert len(keys) == len(ints)
+        assert sum(counts.values()) >= 1
+
+
+@njit(cache=True)
+def _min_distance(va, fa, ea, vb, fb, eb):
+    """Brute-force distance between two surfaces from the closest-point kernels that
+    test_contact_narrow.py checks against ipctk."""
+    best = np.inf
+    for f in range(len(fa)):
+        for p in range(len(vb)):
+            best = min(best, point_triangle_closest(vb[p], va[fa[f, 0]], va[fa[f, 1]], va[fa[f, 2]])[1])
+    for f in range(len(fb)):
+        for p in range(len(va)):
+            best = min(best, point_triangle_closest(va[p], vb[fb[f, 0]], vb[fb[f, 1]], vb[fb[f, 2]])[1])
+    for i in range(len(ea)):
+        for j in range(len(eb)):
+            best = min(best, edge_edge_closest(va[ea[i, 0]], va[ea[i, 1]], vb[eb[j, 0]], vb[eb[j, 1]])[1])
+    return best
+
+
+def _place_at_gap(a, b, direction, gap):
+    """Move b along `direction` until its distance to a equals gap (bisection)."""
+    ea, eb = a.edges(), b.edges()
+
+    def dist(s):
+        return _min_distance(a.vertices, a.faces, ea, b.vertices + s * direction, b.faces, eb)
+
+    lo, hi = -3.0, 3.0  # b overlaps a at lo (distance 0) and is clear of it at hi
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if dist(mid) < gap:
+            lo = mid
+        else:
+            hi = mid
+    return b.translated(hi * direction)
+
+
+def test_action_equals_reaction_and_no_net_moment(rng):
+    law = InterfaceLaw(GBAR, 1e3).packed()
+    a = sand_grain(seed=3, size=1.0)
+    b = _place_at_gap(a, sand_grain(seed=4, size=1.0), np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]), 0.2 * GBAR)
+    counts, ints, floats, topo = pairs_of([a, b])
+    X = np.vstack([a.vertices, b.vertices])
+    ev = evaluate_contacts(X, ints, floats, law, len(X))
+    assert len(ints) > 0 and np.abs(ev.force).max() > 0
+    scale = np.abs(ev.force).max()
+    np.testing.assert_allclose(ev.force.sum(axis=0), 0, atol=1e-12 * scale)
+    for origin in (np.zeros(3), rng.normal(size=3) * 10):
+        np.testing.assert_allclose(np.cross(X - origin, ev.force).sum(axis=0), 0, atol=1e-11 * scale * 10)
+    force_on_a = -ev.force[: a.n_vertices].sum(axis=0)  # ev.force is dPhi/dx
+    assert force_on_a @ (b.centroid - a.centroid) < 0  # repulsive
+
+
+def test_residual_and_tangent_are_derivatives_of_the_potential(rng):
+    law = InterfaceLaw(GBAR, 1e3).packed()
+    top = cube(1.0).rotated(rotation_matrix([0.01, 0.02, 0.3])).translated((0.3, 0.2, 0.0))
+    top = top.translated((0, 0, 0.5 + 0.4 * GBAR - top.vertices[:, 2].min()))
+    X, topo = scene([cube(1.0), top])
+    x = X + 1e-4 * rng.normal(size=X.shape)
+
+    def total(xx):
+        ints, floats = find_contacts(xx, np.array([[0, 1]]), topo, GBAR)
+        return evaluate_contacts(xx, ints, floats, law, len(xx), tangent=True), ints
+
+    ev, ints = total(x)
+    assert len(ints) >= 3
+    K = ev.tangent_matrix(len(x)).toarray()
+    h = 1e-7
+    fd_f = np.zeros(x.size)
+    fd_K = np.zeros_like(K)
+    for k in range(x.size):
+        xp, xm = x.ravel().copy(), x.ravel().copy()
+        xp[k] += h
+        xm[k] -= h
+        ep, _ = total(xp.reshape(-1, 3))
+        em, _ = total(xm.reshape(-1, 3))
+        fd_f[k] = (ep.total_energy - em.total_energy) / (2 * h)
+        fd_K[:, k] = (ep.force.ravel() - em.force.ravel()) / (2 * h)
+    np.testing.assert_allclose(ev.force.ravel(), fd_f, atol=1e-6 * np.abs(fd_f).max())
+    np.testing.assert_allclose(K, fd_K, atol=1e-6 * np.abs(K).max())
+    np.testing.assert_allclose(K, K.T, atol=1e-9 * np.abs(K).max())
+
+
+@pytest.mark.parametrize("n_grains", [2, 50, 515])
+def test_broad_phase_equals_brute_force(n_grains, rng):
+    L = 1.3 * n_grains ** (1 / 3)
+    centres = rng.uniform(0, L, size=(n_grains, 3))
+    x = (centres[:, None, :] + rng.uniform(-0.5, 0.5, size=(n_grains, 12, 3))).reshape(-1, 3)
+    vptr = np.arange(n_grains + 1) * 12
+    for gap in (0.0, 0.05, 0.5):
+        np.testing.assert_array_equal(candidate_pairs(x, vptr, gap), brute_force_pairs(x, vptr, gap))
