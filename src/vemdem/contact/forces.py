@@ -46,7 +46,8 @@ def _local_terms(x, ints, floats, law, want_tangent, energy, local_force, local_
 
 
 @njit(cache=True)
-def _scatter_forces(ints, local_force, out):
+def scatter_local_forces(ints, local_force, out):
+    """out[v] += local force of every pair at its node v (serial: pairs share vertices)."""
     for c in range(len(ints)):
         for i in range(N_NODES[ints[c, KIND]]):
             v = ints[c, NODE0 + i]
@@ -66,18 +67,23 @@ class ContactEvaluation:
         return float(self.energy.sum())
 
     def tangent_matrix(self, n_vertices: int) -> sp.csr_matrix:
-        rows, cols, vals = [], [], []
-        for kind in np.unique(self.ints[:, KIND]):
-            sel = self.ints[:, KIND] == kind
-            nn = N_NODES[kind]
-            dofs = (3 * self.ints[sel, NODE0 : NODE0 + nn][:, :, None] + np.arange(3)).reshape(-1, 3 * nn)
-            rows.append(np.repeat(dofs, 3 * nn, axis=1).ravel())
-            cols.append(np.tile(dofs, (1, 3 * nn)).ravel())
-            vals.append(self.local_tangent[sel, : 3 * nn, : 3 * nn].ravel())
-        n = 3 * n_vertices
-        if not rows:
-            return sp.csr_matrix((n, n))
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        return local_tangent_matrix(self.ints, self.local_tangent, n_vertices)
+
+
+def local_tangent_matrix(ints, local_tangent, n_vertices: int) -> sp.csr_matrix:
+    """Global sparse matrix (3 n_vertices square) from the pairs' local 18 x 18 blocks."""
+    rows, cols, vals = [], [], []
+    for kind in np.unique(ints[:, KIND]):
+        sel = ints[:, KIND] == kind
+        nn = N_NODES[kind]
+        dofs = (3 * ints[sel, NODE0 : NODE0 + nn][:, :, None] + np.arange(3)).reshape(-1, 3 * nn)
+        rows.append(np.repeat(dofs, 3 * nn, axis=1).ravel())
+        cols.append(np.tile(dofs, (1, 3 * nn)).ravel())
+        vals.append(local_tangent[sel, : 3 * nn, : 3 * nn].ravel())
+    n = 3 * n_vertices
+    if not rows:
+        return sp.csr_matrix((n, n))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 
 def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: bool = False) -> ContactEvaluation:
@@ -87,5 +93,5 @@ def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: boo
     local_tangent = np.zeros((m, 18, 18)) if tangent else np.zeros((1, 18, 18))
     _local_terms(np.ascontiguousarray(x), ints, floats, law_params, tangent, energy, local_force, local_tangent)
     force = np.zeros((n_vertices, 3))
-    _scatter_forces(ints, local_force, force)
+    scatter_local_forces(ints, local_force, force)
     return ContactEvaluation(energy, force, local_tangent if tangent else None, ints)

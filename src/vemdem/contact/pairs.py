@@ -100,7 +100,7 @@ def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_p
     fa = edge_faces[e, 0]
     fb = edge_faces[e, 1]
     ca = _vf_gap(x, p, fa, faces, gbar)[0] >= 0.0
-    cb = _vf_gap(x, p, fb, faces, gbar)[0] >= 0.0
+    cb = fb >= 0 and _vf_gap(x, p, fb, faces, gbar)[0] >= 0.0  # fb < 0: rim of an open wall
     if edge_type[e] == CONCAVE:
         if ca and cb:
             return False

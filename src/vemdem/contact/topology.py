@@ -19,7 +19,7 @@ class SurfaceTopology:
     faces: np.ndarray  # (F, 3) global vertex indices, outward
     face_grain: np.ndarray  # (F,)
     edges: np.ndarray  # (E, 2) global vertex indices, sorted
-    edge_faces: np.ndarray  # (E, 2) the two faces at each edge
+    edge_faces: np.ndarray  # (E, 2) the two faces at each edge (-1: open boundary of a wall)
     edge_type: np.ndarray  # (E,) CONVEX, FLAT or CONCAVE
     edge_grain: np.ndarray  # (E,)
     vertex_grain: np.ndarray  # (N,)
@@ -41,8 +41,10 @@ def _csr(keys: np.ndarray, values: np.ndarray, n: int):
 
 def edge_types(vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray, edge_faces: np.ndarray,
                rel_tol: float = 1e-6) -> np.ndarray:  # fmt: skip
-    """Convex when the second face's far vertex lies below the first face's plane."""
-    f1, f2 = faces[edge_faces[:, 0]], faces[edge_faces[:, 1]]
+    """Convex when the second face's far vertex lies below the first face's plane. The boundary
+    edge of an open wall surface counts as convex (it is a rim)."""
+    open_edge = edge_faces[:, 1] < 0
+    f1, f2 = faces[edge_faces[:, 0]], faces[np.where(open_edge, edge_faces[:, 0], edge_faces[:, 1])]
     a, b, c = (vertices[f1[:, i]] for i in range(3))
     n1 = np.cross(b - a, c - a)
     n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
@@ -52,11 +54,13 @@ def edge_types(vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray, edge_
     out = np.full(len(edges), FLAT, dtype=np.int64)
     out[height < -rel_tol * length] = CONVEX
     out[height > rel_tol * length] = CONCAVE
+    out[open_edge] = CONVEX
     return out
 
 
 def build_topology(vertices: np.ndarray, faces_per_grain: list[np.ndarray], vertex_ptr: np.ndarray) -> SurfaceTopology:
-    """vertices: (N, 3) reference positions of all grains; faces_per_grain: local triangles."""
+    """vertices: (N, 3) reference positions of all surfaces (grains, then triangulated walls);
+    faces_per_grain: local triangles of each surface."""
     faces = np.vstack([f + vertex_ptr[g] for g, f in enumerate(faces_per_grain)]).astype(np.int64)
     n_faces = np.array([len(f) for f in faces_per_grain])
     face_grain = np.repeat(np.arange(len(faces_per_grain)), n_faces)
@@ -65,8 +69,13 @@ def build_topology(vertices: np.ndarray, faces_per_grain: list[np.ndarray], vert
     key = np.sort(directed, axis=1)
     edges, inverse = np.unique(key, axis=0, return_inverse=True)
     inverse = inverse.ravel()
+    edge_faces = np.full((len(edges), 2), -1, dtype=np.int64)
     order = np.argsort(inverse, kind="stable")
-    edge_faces = owner[order].reshape(-1, 2)  # closed manifold surfaces: two faces per edge
+    starts = np.searchsorted(inverse[order], np.arange(len(edges)))
+    counts = np.bincount(inverse, minlength=len(edges))
+    edge_faces[:, 0] = owner[order][starts]
+    two = counts == 2
+    edge_faces[two, 1] = owner[order][starts[two] + 1]
     n = len(vertices)
     vertex_grain = np.repeat(np.arange(len(vertex_ptr) - 1), np.diff(vertex_ptr))
     edge_grain = vertex_grain[edges[:, 0]]

@@ -1,0 +1,259 @@
+"""The contact layer of a scene: grains, walls, search, forces, tangent and friction history.
+
+Data flow per time step (formulation.md 4.1): `search` runs the broad phase once at the start
+of a step; `evaluate` re-solves the LCPs of those candidates at every Newton iterate and returns
+the contact potential, residual, tangent and the wall reactions; `commit` stores the friction
+history of the converged state.
+
+Walls are extra rigid nodes appended after the grains' vertices (x_all = [x; wall nodes]):
+- a plane is one triangle (p, p + t1, p + t2) whose vertex-face LCP has no range limit, so the
+  plane is infinite and its pairs share every kernel (forces, friction, tangent) with grains;
+- a triangulated wall is an extra surface of the topology, searched against each grain's box.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit, prange
+
+from .broad import candidate_pairs, grain_boxes
+from .forces import evaluate_contacts, local_tangent_matrix, scatter_local_forces
+from .friction import FrictionLaw, dissipative_terms
+from .law import InterfaceLaw
+from .narrow import VERTEX_FACE, vertex_face_lcp
+from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
+from .topology import build_topology
+from .walls import MeshWall, PlaneWall
+
+
+class PenetrationError(FloatingPointError):
+    """A vertex is on the wrong side of a wall: the state is not admissible."""
+
+
+@dataclass
+class ContactHistory:
+    """Friction state of the pairs active at the last converged step, sorted by key."""
+
+    keys: np.ndarray
+    c_prev: np.ndarray  # (m, 2)
+    gt: np.ndarray  # (m, 3)
+    stick: np.ndarray  # (m,) bool
+
+    @classmethod
+    def empty(cls):
+        return cls(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros(0, bool))
+
+    def lookup(self, keys: np.ndarray):
+        """(found, c_prev, gt, stick) for each key; new pairs start from zero with stick."""
+        idx = np.searchsorted(self.keys, keys)
+        idx = np.minimum(idx, max(len(self.keys) - 1, 0))
+        found = (len(self.keys) > 0) & (self.keys[idx] == keys) if len(self.keys) else np.zeros(len(keys), bool)
+        c_prev = np.where(found[:, None], self.c_prev[idx] if len(self.keys) else 0.0, 0.0)
+        gt = np.where(found[:, None], self.gt[idx] if len(self.keys) else 0.0, 0.0)
+        stick = np.where(found, self.stick[idx] if len(self.keys) else True, True)
+        return found, c_prev, gt, stick
+
+
+def pair_keys(ints: np.ndarray) -> np.ndarray:
+    """Identity of a pair across steps: its kind and the two features (not the contact point)."""
+    return (ints[:, KIND] << 60) | (ints[:, FEATURE_A] << 30) | (ints[:, FEATURE_B] + (1 << 29))
+
+
+@njit(parallel=True, cache=True)
+def _plane_candidates(x, n_vertices, point, normal, gbar, flags, signed):
+    for v in prange(n_vertices):
+        d = 0.0
+        for a in range(3):
+            d += (x[v, a] - point[a]) * normal[a]
+        signed[v] = d
+        flags[v] = d <= gbar
+
+
+@dataclass
+class ContactResult:
+    energy: float
+    force: np.ndarray  # (N, 3) dPhi/dx on grain vertices (+ dissipative terms): minus the contact force
+    tangent: sp.csr_matrix | None
+    ints: np.ndarray
+    floats: np.ndarray
+    wall_reactions: np.ndarray  # (n_walls, 3) force of the grains on each wall
+    trial_history: ContactHistory
+    dissipation_power: float  # -F . v of damping and friction at this state (>= 0)
+
+    @property
+    def n_contacts(self) -> int:
+        return len(self.ints)
+
+
+class ContactModel:
+    def __init__(self, reference: np.ndarray, faces_per_grain: list, vertex_ptr: np.ndarray, grain_mass: np.ndarray,
+                 law: InterfaceLaw, friction: FrictionLaw = FrictionLaw(), planes=(), meshes=(),
+                 scene_size: float | None = None):  # fmt: skip
+        self.law = law
+        self.law_params = law.packed()
+        self.friction = friction
+        self.friction_params = friction.packed()
+        self.planes: list[PlaneWall] = list(planes)
+        self.meshes: list[MeshWall] = list(meshes)
+        self.n_grains = len(vertex_ptr) - 1
+        self.n_vertices = int(vertex_ptr[-1])
+        self.vertex_ptr = np.asarray(vertex_ptr, np.int64)
+        self.grain_mass = np.asarray(grain_mass, float)
+        size = scene_size or float(np.ptp(reference, axis=0).max())
+        # plane triangles (p, p + s t1, p + s t2), t1, t2 an orthonormal basis of the plane
+        self._plane_frames = [self._plane_frame(pl.normal, size) for pl in self.planes]
+        mesh_vertices = [np.asarray(m.vertices, float) for m in self.meshes]
+        surf_ptr = np.concatenate([self.vertex_ptr, self.n_vertices + np.cumsum([0] + [len(v) for v in mesh_vertices])[1:]])
+        all_ref = np.vstack([reference] + mesh_vertices) if mesh_vertices else reference
+        self.topology = build_topology(all_ref, list(faces_per_grain) + [np.asarray(m.faces) for m in self.meshes],
+                                       surf_ptr)  # fmt: skip
+        self.n_mesh_nodes = len(all_ref) - self.n_vertices
+        self.plane_node0 = len(all_ref)  # plane nodes follow the mesh walls' nodes
+        self.plane_face_base = len(self.topology.faces)
+
+    @staticmethod
+    def _plane_frame(normal, size):
+        t1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(normal, t1)
+        return np.array([np.zeros(3), size * t1, size * t2])  # counter-clockwise seen from the normal side
+
+    # ------------------------------------------------------------------ positions of wall nodes
+    def wall_nodes(self, t: float) -> np.ndarray:
+        nodes = [m.vertices_at(t) for m in self.meshes]
+        nodes += [pl.point_at(t) + frame for pl, frame in zip(self.planes, self._plane_frames)]
+        return np.vstack(nodes) if nodes else np.zeros((0, 3))
+
+    def all_positions(self, x: np.ndarray, t: float) -> np.ndarray:
+        return np.ascontiguousarray(np.vstack([x, self.wall_nodes(t)]))
+
+    # ------------------------------------------------------------------ search (once per step)
+    def search(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Candidate surface pairs: grain-grain from the grid, grain-mesh-wall by boxes."""
+        gbar = self.law.activation_gap
+        pairs = [candidate_pairs(x, self.vertex_ptr, gbar)]
+        if self.meshes:
+            x_all = self.all_positions(x, t)
+            lo, hi = grain_boxes(x_all, self.topology.grain_vertex_ptr, 0.5 * gbar)
+            G = self.n_grains
+            for w, mesh in enumerate(self.meshes):
+                if not mesh.motion.active(t):
+                    continue
+                k = G + w
+                ok = np.all((hi[:G] >= lo[k]) & (hi[k] >= lo[:G]), axis=1)
+                grains = np.flatnonzero(ok)
+                pairs.append(np.column_stack([grains, np.full(len(grains), k)]))
+        return np.vstack(pairs).astype(np.int64)
+
+    # ------------------------------------------------------------------ pairs at a state
+    def pairs(self, x: np.ndarray, t: float, candidates: np.ndarray):
+        x_all = self.all_positions(x, t)
+        ints, floats = find_contacts(x_all, candidates, self.topology, self.law.activation_gap)
+        plane_ints, plane_floats = self._plane_pairs(x_all, t)
+        return x_all, np.vstack([ints, plane_ints]), np.vstack([floats, plane_floats])
+
+    def _plane_pairs(self, x_all, t):
+        gbar = self.law.activation_gap
+        ints, floats = [np.zeros((0, INT_COLS), np.int64)], [np.zeros((0, FLOAT_COLS))]
+        flags = np.zeros(self.n_vertices, np.bool_)
+        signed = np.zeros(self.n_vertices)
+        grain_of = self.topology.vertex_grain
+        for w, plane in enumerate(self.planes):
+            if not plane.motion.active(t):
+                continue
+            _plane_candidates(x_all, self.n_vertices, plane.point_at(t), plane.normal, gbar, flags, signed)
+            if (signed <= 0).any():
+                v = int(np.argmin(signed))
+                raise PenetrationError(f"vertex {v} (grain {grain_of[v]}) is behind wall {plane.name!r}")
+            verts = np.flatnonzero(flags)
+            n0 = self.plane_node0 + 3 * w
+            rec = np.full((len(verts), INT_COLS), -1, np.int64)
+            rec[:, KIND] = VERTEX_FACE
+            rec[:, GRAIN_A] = grain_of[verts]
+            rec[:, GRAIN_B] = self.n_grains + len(self.meshes) + w
+            rec[:, FEATURE_A] = verts
+            rec[:, FEATURE_B] = self.plane_face_base + w
+            rec[:, NODE0] = verts
+            rec[:, NODE0 + 1 : NODE0 + 4] = [n0, n0 + 1, n0 + 2]
+            fl = np.zeros((len(verts), FLOAT_COLS))
+            tri = x_all[n0 : n0 + 3]
+            for k, v in enumerate(verts):  # small: only vertices within gbar of the plane
+                _, u, vv = vertex_face_lcp(x_all[v], tri[0], tri[1], tri[2])
+                fl[k] = (u, vv, signed[v])
+            ints.append(rec)
+            floats.append(fl)
+        return np.vstack(ints), np.vstack(floats)
+
+    # ------------------------------------------------------------------ forces
+    def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
+                 tangent: bool = False) -> ContactResult:  # fmt: skip
+        """Contact energy, residual (dPhi/dx + dissipative terms), tangent and wall reactions.
+
+        v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics."""
+        x_all, ints, floats = self.pairs(x, t, candidates)
+        n_all = len(x_all)
+        conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
+        residual = conservative.force
+        K = conservative.tangent_matrix(n_all) if tangent else None
+        keys = pair_keys(ints)
+        history = history or ContactHistory.empty()
+        found, c_prev, gt_prev, stick_prev = history.lookup(keys)
+        stick_now, gt_now = stick_prev.copy(), np.zeros((len(ints), 3))
+        power = 0.0
+        if self.friction.active and len(ints):
+            v_all = np.zeros_like(x_all)
+            if v is not None:
+                v_all[: self.n_vertices] = v
+                v_all[self.n_vertices :] = self._wall_velocities(t)
+            local_force = np.zeros((len(ints), 6, 3))
+            local_tangent = np.zeros((len(ints), 18, 18)) if tangent else np.zeros((1, 18, 18))
+            _dissipative(self, x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, tangent,
+                         local_force, local_tangent, stick_now, gt_now)  # fmt: skip
+            extra = np.zeros_like(x_all)
+            scatter_local_forces(ints, local_force, extra)
+            residual = residual + extra
+            power = float(np.sum(extra * v_all))
+            if tangent:
+                K = K + local_tangent_matrix(ints, local_tangent, n_all)
+        reactions = self._wall_reactions(residual)
+        N = self.n_vertices
+        K_grains = K[: 3 * N, : 3 * N].tocsr() if tangent else None
+        trial = ContactHistory(keys, floats[:, :2].copy(), gt_now, stick_now)
+        order = np.argsort(keys, kind="stable")
+        trial = ContactHistory(keys[order], trial.c_prev[order], trial.gt[order], trial.stick[order])
+        return ContactResult(conservative.total_energy, residual[:N], K_grains, ints, floats, reactions, trial, power)
+
+    def _wall_velocities(self, t):
+        vel = [np.repeat(m.motion.velocity(t)[None, :], len(m.vertices), axis=0) for m in self.meshes]
+        vel += [np.repeat(pl.motion.velocity(t)[None, :], 3, axis=0) for pl in self.planes]
+        return np.vstack(vel) if vel else np.zeros((0, 3))
+
+    def _wall_reactions(self, residual):
+        """Force of the grains on each wall: minus the residual (dPhi/dx) summed over its nodes."""
+        out = []
+        start = self.n_vertices
+        for m in self.meshes:
+            out.append(residual[start : start + len(m.vertices)].sum(axis=0))
+            start += len(m.vertices)
+        for _ in self.planes:
+            out.append(residual[start : start + 3].sum(axis=0))
+            start += 3
+        return -np.array(out).reshape(-1, 3)
+
+    def masses_of_pairs(self, ints):
+        """m_eq = m_A m_B / (m_A + m_B); a wall counts as infinitely heavy (m_eq = m_grain)."""
+        G = self.n_grains
+        mA = self.grain_mass[ints[:, GRAIN_A]]
+        gB = ints[:, GRAIN_B]
+        mB = self.grain_mass[np.minimum(gB, G - 1)]
+        return np.where(gB < G, mA * mB / (mA + mB), mA)
+
+
+def _dissipative(model, x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, tangent,
+                 local_force, local_tangent, stick_now, gt_now):  # fmt: skip
+    dissipative_terms(x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, model.law_params,
+                      model.friction_params, model.masses_of_pairs(ints), tangent, local_force, local_tangent,
+                      stick_now, gt_now)  # fmt: skip

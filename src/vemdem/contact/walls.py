@@ -1,0 +1,116 @@
+"""Rigid walls with a prescribed motion: planes and triangulated bodies (formulation.md 4.7).
+
+A wall is fixed, removed at a given time, or moved along a piecewise-linear displacement
+history. Planes touch grains through vertex-plane pairs only (no edge or face of a grain can
+come closer to a plane than its vertices). Triangulated walls (a lid, a box, an STL surface)
+use the same pair logic as grain-grain contact: they enter the contact topology as extra,
+rigid surfaces whose vertices are prescribed, not unknowns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit, prange
+
+from .law import normal_force, normal_potential
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Piecewise-linear rigid displacement d(t) through (times, displacements); removal time."""
+
+    times: tuple = (0.0,)
+    displacements: tuple = ((0.0, 0.0, 0.0),)
+    removed_at: float = np.inf
+
+    def __post_init__(self):
+        t = np.asarray(self.times, float)
+        d = np.asarray(self.displacements, float)
+        if t.ndim != 1 or d.shape != (len(t), 3):
+            raise ValueError("wall motion: need one 3-vector displacement per time")
+        if np.any(np.diff(t) <= 0):
+            raise ValueError("wall motion: times must increase")
+
+    def displacement(self, t: float) -> np.ndarray:
+        times = np.asarray(self.times, float)
+        d = np.asarray(self.displacements, float)
+        return np.array([np.interp(t, times, d[:, a]) for a in range(3)])
+
+    def velocity(self, t: float) -> np.ndarray:
+        times = np.asarray(self.times, float)
+        d = np.asarray(self.displacements, float)
+        k = np.searchsorted(times, t, side="right") - 1
+        if k < 0 or k >= len(times) - 1:
+            return np.zeros(3)
+        return (d[k + 1] - d[k]) / (times[k + 1] - times[k])
+
+    def active(self, t: float) -> bool:
+        return t < self.removed_at
+
+
+@dataclass(frozen=True)
+class PlaneWall:
+    point: np.ndarray
+    normal: np.ndarray  # points towards the grains
+    motion: Motion = field(default_factory=Motion)
+    name: str = "plane"
+
+    def __post_init__(self):
+        n = np.asarray(self.normal, float)
+        if not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+            raise ValueError(f"wall {self.name}: normal must be a non-zero finite vector")
+        object.__setattr__(self, "normal", n / np.linalg.norm(n))
+        object.__setattr__(self, "point", np.asarray(self.point, float))
+
+    def point_at(self, t: float) -> np.ndarray:
+        return self.point + self.motion.displacement(t)
+
+
+@dataclass(frozen=True)
+class MeshWall:
+    """A rigid triangulated surface (open or closed); faces oriented towards the grains."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    motion: Motion = field(default_factory=Motion)
+    name: str = "mesh"
+
+    def vertices_at(self, t: float) -> np.ndarray:
+        return np.asarray(self.vertices, float) + self.motion.displacement(t)
+
+
+@njit(parallel=True, cache=True)
+def plane_contacts(x, point, normal, law, want_tangent, energy, force, stiffness, gap):
+    """Vertex-plane pairs of every vertex: Phi(d), dPhi/dx = -f_n n, d2Phi/dx2 = k n n^T.
+
+    gap[v] is the signed distance; penetration (d <= 0) gives infinite energy."""
+    gbar = law[0]
+    for v in prange(len(x)):
+        d = (x[v, 0] - point[0]) * normal[0] + (x[v, 1] - point[1]) * normal[1] + (x[v, 2] - point[2]) * normal[2]
+        gap[v] = d
+        if d >= gbar:
+            energy[v] = 0.0
+            stiffness[v] = 0.0
+            for a in range(3):
+                force[v, a] = 0.0
+            continue
+        fn, k = normal_force(d, law)
+        energy[v] = normal_potential(d, law)
+        stiffness[v] = k
+        for a in range(3):
+            force[v, a] = -fn * normal[a]
+
+
+def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0.0)) -> list[PlaneWall]:
+    """Floor and four vertical walls of an open box (normals pointing inside)."""
+    cx, cy = center
+    hx, hy = 0.5 * size_x, 0.5 * size_y
+    return [
+        PlaneWall(np.array([cx, cy, floor_z]), np.array([0.0, 0, 1]), name="floor"),
+        PlaneWall(np.array([cx - hx, cy, floor_z]), np.array([1.0, 0, 0]), name="wall -x"),
+        PlaneWall(np.array([cx + hx, cy, floor_z]), np.array([-1.0, 0, 0]), name="wall +x"),
+        PlaneWall(np.array([cx, cy - hy, floor_z]), np.array([0.0, 1, 0]), name="wall -y"),
+        PlaneWall(np.array([cx, cy + hy, floor_z]), np.array([0.0, -1, 0]), name="wall +y"),
+    ]
