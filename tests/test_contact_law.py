@@ -64,3 +64,26 @@ def test_bad_parameters(kwargs):
     base.update(kwargs)
     with pytest.raises(ValueError, match="contact law"):
         InterfaceLaw(**base)
+
+
+def test_default_parameters_follow_the_grain():
+    from vemdem.contact.defaults import default_contact_laws
+
+    d, E, rho = 1.45e-3, 90e9, 2200.0
+    law, fr = default_contact_laws(d, E, rho, mu_s=0.6, mu_d=0.5)
+    p = law.packed()
+    weight = rho * np.pi * d**3 / 6 * 9.81
+    assert law.activation_gap == pytest.approx(0.01 * d)
+    f_switch, k_switch = normal_force(law.switch_gap, p)
+    assert f_switch == pytest.approx(10 * weight, rel=1e-12)  # F_ref reached where the barrier starts
+    assert fr.tangential_penalty == pytest.approx(k_switch, rel=1e-12)
+    assert (fr.mu_s, fr.mu_d, fr.damping_ratio) == (0.6, 0.5, 0.5)
+    # a very soft, heavy material: the cap keeps the contact no stiffer than the grain
+    law_soft, _ = default_contact_laws(d, 1e3, rho)
+    assert normal_force(law_soft.switch_gap, law_soft.packed())[1] == pytest.approx(1e3 * d, rel=1e-12)
+    law2, fr2 = default_contact_laws(d, E, rho, activation_gap=2e-5, damping_ratio=0.1)
+    assert law2.activation_gap == 2e-5 and fr2.damping_ratio == 0.1
+    with pytest.raises(ValueError, match="unknown parameter 'stickiness'"):
+        default_contact_laws(d, E, rho, stickiness=1.0)
+    with pytest.raises(ValueError, match="must not exceed mu_s"):
+        default_contact_laws(d, E, rho, mu_s=0.2, mu_d=0.3)
