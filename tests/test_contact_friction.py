@@ -160,3 +160,17 @@ def test_damping_never_pulls():
     res = model.evaluate(x, 0.0, model.search(x, 0.0), v=approaching)
     assert res.wall_reactions[0][2] < -4 * normal_force(GAP, LAW.packed())[0]
     assert res.dissipation_power > 0
+
+
+def test_wall_from_an_stl_file(tmp_path):
+    import meshio
+
+    c = cube(1e-3)
+    lid_v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]]) * 1e-3 + [0, 0, 0.5e-3 + GAP]
+    soup = lid_v[np.array([[0, 1, 2], [0, 2, 3]])].reshape(-1, 3)  # normals up: flip them
+    meshio.write(tmp_path / "lid.stl", meshio.Mesh(soup, [("triangle", np.arange(6).reshape(2, 3))]))
+    lid = MeshWall.from_file(tmp_path / "lid.stl", flip=True)
+    assert len(lid.vertices) == 4
+    model = ContactModel(c.vertices, [c.faces], np.array([0, 8]), np.array([1.0]), LAW, FRICTION, meshes=[lid])
+    res = model.evaluate(c.vertices, 0.0, model.search(c.vertices, 0.0))
+    assert res.n_contacts == 4 and res.wall_reactions[0][2] > 0

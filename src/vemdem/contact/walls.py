@@ -80,6 +80,23 @@ class MeshWall:
     def vertices_at(self, t: float) -> np.ndarray:
         return np.asarray(self.vertices, float) + self.motion.displacement(t)
 
+    @classmethod
+    def from_file(cls, path, motion: Motion | None = None, flip: bool = False) -> "MeshWall":
+        """A rigid wall from an STL/OBJ/PLY surface; coincident vertices are merged. `flip`
+        reverses the faces when the file's normals point away from the grains."""
+        import meshio
+
+        from ..geometry.io import merge_vertices
+
+        mesh = meshio.read(path)
+        tris = np.vstack([b.data for b in mesh.cells if b.type == "triangle"])
+        vertices, faces = merge_vertices(np.asarray(mesh.points, float), tris)
+        used = np.unique(faces)
+        remap = np.full(len(vertices), -1)
+        remap[used] = np.arange(len(used))
+        faces = remap[faces]
+        return cls(vertices[used], faces[:, ::-1] if flip else faces, motion or Motion(), name=str(path))
+
 
 @njit(parallel=True, cache=True)
 def plane_contacts(x, point, normal, law, want_tangent, energy, force, stiffness, gap):
