@@ -2,7 +2,7 @@
 
     W_i = (1 - beta_i) V psi(F_Pi) + beta_i sum_t V_t psi(F_t)
 
-Both terms are sums of *pieces* with a constant deformation gradient F = sum_a x_a (x) b_a:
+Both terms are sums of *pieces* with a constant deformation gradient F = I + sum_a u_a (x) b_a:
 the projection (nodes = all vertices, b_a = g_v, weight (1 - beta_i) V) and every sub-mesh
 tetrahedron (4 nodes, b_a = grad N_a, weight beta_i V_t). One compiled kernel evaluates any
 piece, so the projection and the stabilisation share the same, tested code.
@@ -154,7 +154,7 @@ def build_elements(
 
 @njit(parallel=True, cache=True)
 def _evaluate_grains(
-    x, vertex_ptr, virtual_ptr, virtual_weight_ptr, virtual_weights,
+    x, X, vertex_ptr, virtual_ptr, virtual_weight_ptr, virtual_weights,
     piece_ptr, piece_weight, piece_node_ptr, piece_nodes, piece_grads,
     mu, kappa, block_ptr, want_force, want_tangent, energy, force, blocks, inverted,
 ):  # fmt: skip
@@ -165,14 +165,16 @@ def _evaluate_grains(
         nk = virtual_ptr[g + 1] - virtual_ptr[g]
         na = nv + nk
         T = virtual_weights[virtual_weight_ptr[g] : virtual_weight_ptr[g + 1]].reshape(nk, nv)
-        xa = np.zeros((na, 3))
+        # Displacements, not positions: F = I + sum_a u_a (x) b_a is exactly I at rest, whereas
+        # sum_a x_a (x) b_a = I only to round-off, which for E ~ 1e11 Pa is a stress above gravity's.
+        ua = np.zeros((na, 3))
         for v in range(nv):
             for i in range(3):
-                xa[v, i] = x[v0 + v, i]
+                ua[v, i] = x[v0 + v, i] - X[v0 + v, i]
         for k in range(nk):
             for v in range(nv):
                 for i in range(3):
-                    xa[nv + k, i] += T[k, v] * x[v0 + v, i]
+                    ua[nv + k, i] += T[k, v] * ua[v, i]
         fa = np.zeros((na, 3))
         Ka = np.zeros((3 * na, 3 * na)) if want_tangent else np.zeros((1, 1))
         AG = np.zeros((na, 9, 3)) if want_tangent else np.zeros((1, 9, 3))
@@ -184,11 +186,13 @@ def _evaluate_grains(
             q0 = piece_node_ptr[p]
             q1 = piece_node_ptr[p + 1]
             F[:, :] = 0.0
+            for i in range(3):
+                F[i, i] = 1.0
             for q in range(q0, q1):
                 a = piece_nodes[q]
                 for i in range(3):
                     for I in range(3):
-                        F[i, I] += xa[a, i] * piece_grads[q, I]
+                        F[i, I] += ua[a, i] * piece_grads[q, I]
             psi = neo_hooke(F, mu[g], kappa[g], want_tangent, P, A)
             if psi == np.inf:
                 inverted[g] = True
@@ -281,7 +285,7 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
     blocks = np.zeros(elements.block_ptr[-1]) if tangent else np.zeros(1)
     inverted = np.zeros(G, dtype=np.bool_)
     _evaluate_grains(
-        x, elements.vertex_ptr, elements.virtual_ptr, elements.virtual_weight_ptr, elements.virtual_weights,
+        x, elements.reference, elements.vertex_ptr, elements.virtual_ptr, elements.virtual_weight_ptr, elements.virtual_weights,
         elements.piece_ptr, elements.piece_weight, elements.piece_node_ptr, elements.piece_nodes,
         elements.piece_grads, elements.mu, elements.kappa, elements.block_ptr, force, tangent,
         energy, f, blocks, inverted,
@@ -317,9 +321,9 @@ def block_indices(elements: GrainElements):
 
 
 def projected_deformation_gradients(elements: GrainElements, x: np.ndarray) -> np.ndarray:
-    """F_Pi (G, 3, 3) of every grain at vertex positions x (N, 3)."""
-    outer = np.einsum("vi,vj->vij", x, elements.projection_grads)
-    return np.add.reduceat(outer, elements.vertex_ptr[:-1], axis=0)
+    """F_Pi = I + sum_v u_v (x) g_v (G, 3, 3) of every grain at vertex positions x (N, 3)."""
+    outer = np.einsum("vi,vj->vij", x - elements.reference, elements.projection_grads)
+    return np.eye(3) + np.add.reduceat(outer, elements.vertex_ptr[:-1], axis=0)
 
 
 @njit(cache=True)
