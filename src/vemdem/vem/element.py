@@ -181,6 +181,7 @@ def _evaluate_grains(
         F = np.empty((3, 3))
         P = np.empty((3, 3))
         A = np.empty((9, 9))
+        kab = np.empty((3, 3))
         e = 0.0
         for p in range(piece_ptr[g], piece_ptr[g + 1]):
             q0 = piece_node_ptr[p]
@@ -218,17 +219,26 @@ def _evaluate_grains(
                             for K in range(3):
                                 s += A[row, 3 * j + K] * piece_grads[qb, K]
                             AG[r, row, j] = s
+                # A has major symmetry, so K_ba = K_ab^T: compute the pairs qb >= qa only and mirror
+                # (half the multiplications of the plain double loop).
                 for qa in range(q0, q1):
                     a = piece_nodes[qa]
-                    for qb in range(q0, q1):
+                    ba0 = c * piece_grads[qa, 0]
+                    ba1 = c * piece_grads[qa, 1]
+                    ba2 = c * piece_grads[qa, 2]
+                    for qb in range(qa, q1):
                         b = piece_nodes[qb]
                         r = qb - q0
                         for i in range(3):
                             for j in range(3):
-                                s = 0.0
-                                for I in range(3):
-                                    s += piece_grads[qa, I] * AG[r, 3 * i + I, j]
-                                Ka[3 * a + i, 3 * b + j] += c * s
+                                kab[i, j] = ba0 * AG[r, 3 * i, j] + ba1 * AG[r, 3 * i + 1, j] + ba2 * AG[r, 3 * i + 2, j]
+                        for i in range(3):
+                            for j in range(3):
+                                Ka[3 * a + i, 3 * b + j] += kab[i, j]
+                        if qb != qa:
+                            for i in range(3):
+                                for j in range(3):
+                                    Ka[3 * b + j, 3 * a + i] += kab[i, j]
         energy[g] = e
         if inverted[g]:
             continue
@@ -245,23 +255,49 @@ def _evaluate_grains(
 
 @njit(cache=True)
 def _condense_tangent(Ka, T, nv, nk, out):
-    """out = T^T Ka T with T = [I; T_virtual] acting on each of x, y, z."""
-    na = nv + nk
-    B = np.empty((3 * na, 3 * nv))  # Ka T
-    for r in range(3 * na):
-        for w in range(nv):
-            for j in range(3):
-                s = Ka[r, 3 * w + j]
-                for k in range(nk):
-                    s += Ka[r, 3 * (nv + k) + j] * T[k, w]
-                B[r, 3 * w + j] = s
-    for v in range(nv):
-        for i in range(3):
-            for col in range(3 * nv):
-                s = B[3 * v + i, col]
-                for k in range(nk):
-                    s += T[k, v] * B[3 * (nv + k) + i, col]
-                out[3 * v + i, col] = s
+    """out = T^T Ka T with T = [I; T_virtual] acting on each of x, y, z.
+
+    Written as a copy of the vertex block plus rank updates with unit-stride inner loops
+    (the plain triple loop with its length-nk inner sum cost more than the whole assembly)."""
+    n3 = 3 * nv
+    for r in range(n3):
+        for col in range(n3):
+            out[r, col] = Ka[r, col]
+    if nk == 0:
+        return
+    # vertex rows, virtual columns: out[r, 3w+j] += sum_k Ka[r, n3+3k+j] T[k, w]
+    for r in range(n3):
+        for k in range(nk):
+            a0 = Ka[r, n3 + 3 * k]
+            a1 = Ka[r, n3 + 3 * k + 1]
+            a2 = Ka[r, n3 + 3 * k + 2]
+            for w in range(nv):
+                t = T[k, w]
+                out[r, 3 * w] += a0 * t
+                out[r, 3 * w + 1] += a1 * t
+                out[r, 3 * w + 2] += a2 * t
+    # virtual rows condensed on the columns: C = Ka[virtual, vertex] + Ka[virtual, virtual] T
+    C = np.empty((3 * nk, n3))
+    for kr in range(3 * nk):
+        r = n3 + kr
+        for col in range(n3):
+            C[kr, col] = Ka[r, col]
+        for k in range(nk):
+            a0 = Ka[r, n3 + 3 * k]
+            a1 = Ka[r, n3 + 3 * k + 1]
+            a2 = Ka[r, n3 + 3 * k + 2]
+            for w in range(nv):
+                t = T[k, w]
+                C[kr, 3 * w] += a0 * t
+                C[kr, 3 * w + 1] += a1 * t
+                C[kr, 3 * w + 2] += a2 * t
+    # out[3v+i, :] += sum_k T[k, v] C[3k+i, :]
+    for k in range(nk):
+        for v in range(nv):
+            t = T[k, v]
+            for i in range(3):
+                for col in range(n3):
+                    out[3 * v + i, col] += t * C[3 * k + i, col]
 
 
 @dataclass
@@ -299,10 +335,33 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
 
 
 def tangent_matrix(elements: GrainElements, blocks: np.ndarray) -> sp.csr_matrix:
-    """Global sparse tangent (3N x 3N, dof 3 v + i) from the per-grain dense blocks."""
-    rows, cols = block_indices(elements)
+    """Global sparse tangent (3N x 3N, dof 3 v + i) from the per-grain dense blocks.
+
+    A grain's dofs are contiguous and its block is stored row by row, so the flat blocks are
+    already the CSR data array (sorted, no duplicates): no COO sort, only a copy of the data."""
+    indptr, indices = _csr_structure(elements)
     n = 3 * elements.n_vertices
-    return sp.csr_matrix((blocks, (rows, cols)), shape=(n, n))
+    K = sp.csr_matrix((np.array(blocks, dtype=np.float64), indices, indptr), shape=(n, n))
+    K.has_sorted_indices = True
+    return K
+
+
+def _csr_structure(elements: GrainElements):
+    """CSR (indptr, indices) of the block-diagonal tangent (cached on the object)."""
+    cached = getattr(elements, "_csr_structure", None)
+    if cached is not None:
+        return cached
+    ndof = 3 * np.diff(elements.vertex_ptr)
+    nnz = int((ndof**2).sum())
+    dtype = np.int32 if max(nnz, 3 * elements.n_vertices) < np.iinfo(np.int32).max else np.int64
+    indptr = np.zeros(ndof.sum() + 1, dtype=dtype)
+    np.cumsum(np.repeat(ndof, ndof), out=indptr[1:])
+    first = 3 * elements.vertex_ptr[:-1]
+    tiles = [np.tile(np.arange(d0, d0 + nd, dtype=dtype), nd) for d0, nd in zip(first, ndof)]
+    indices = np.concatenate(tiles) if tiles else np.zeros(0, dtype=dtype)
+    result = (indptr, indices)
+    object.__setattr__(elements, "_csr_structure", result)
+    return result
 
 
 def block_indices(elements: GrainElements):
