@@ -24,6 +24,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("config", type=Path)
     run.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--resume", action="store_true", help="continue an interrupted run from DIR/checkpoint.npz")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")
     return p
@@ -57,10 +58,16 @@ def cmd_run(args) -> int:
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     try:
-        summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet))
+        kwargs = {"resume": True} if args.resume else {}
+        summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
     except ConfigError as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
+    except TypeError as exc:
+        if args.resume and "resume" in str(exc):
+            print(f"vemdem: {cfg['scenario']} runs cannot be resumed (they are short)", file=sys.stderr)
+            return 2
+        raise
     except (ArithmeticError, RuntimeError, ValueError, OSError) as exc:
         print(f"vemdem: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"vemdem: results written so far are in {args.out}", file=sys.stderr)

@@ -27,6 +27,14 @@ class Field:
     doc: str = ""
 
 
+@dataclass(frozen=True)
+class TableList:
+    """An array of tables (`[[grains]]`), each checked against `schema`."""
+
+    schema: dict
+    min_items: int = 0
+
+
 def positive(v):
     return None if v > 0 else "must be > 0"
 
@@ -92,6 +100,14 @@ def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
         name = prefix + key
         if isinstance(spec, dict):
             out[key] = apply_schema(data.get(key, {}), spec, name + ".")
+            continue
+        if isinstance(spec, TableList):
+            items = data.get(key, [])
+            if not isinstance(items, list):
+                raise ConfigError(f"{name}: expected an array of tables ([[{key}]]), got {items!r}")
+            if len(items) < spec.min_items:
+                raise ConfigError(f"{name}: at least {spec.min_items} [[{key}]] table(s) required")
+            out[key] = [apply_schema(item, spec.schema, f"{name}[{i}].") for i, item in enumerate(items)]
             continue
         if key not in data:
             if spec.default is REQUIRED:

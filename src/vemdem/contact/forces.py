@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .law import normal_force, normal_potential
-from .narrow import N_NODES, gap_derivatives
+from .narrow import EDGE_EDGE, N_NODES, gap_derivatives, pair_weights
 from .pairs import C0, C1, KIND, NODE0
 
 
@@ -56,9 +56,10 @@ def scatter_local_forces(ints, local_force, out):
 
 
 class ContactEvaluation:
-    def __init__(self, energy, force, local_tangent, ints):
+    def __init__(self, energy, force, local_force, local_tangent, ints):
         self.energy = energy  # (n_pairs,) potential of each pair
         self.force = force  # (N, 3) dPhi/dx
+        self.local_force = local_force  # (n_pairs, 6, 3) dPhi/dx of each pair at its nodes
         self.local_tangent = local_tangent  # (n_pairs, 18, 18) or None
         self.ints = ints
 
@@ -94,4 +95,28 @@ def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: boo
     _local_terms(np.ascontiguousarray(x), ints, floats, law_params, tangent, energy, local_force, local_tangent)
     force = np.zeros((n_vertices, 3))
     scatter_local_forces(ints, local_force, force)
-    return ContactEvaluation(energy, force, local_tangent if tangent else None, ints)
+    return ContactEvaluation(energy, force, local_force, local_tangent if tangent else None, ints)
+
+
+def force_on_side_a(ints, local_force) -> np.ndarray:
+    """Physical contact force on side A of every pair (m, 3): minus dPhi/dx summed over A's nodes
+    (the nodes with positive weight: the vertex, or the first edge)."""
+    kinds = ints[:, KIND]
+    n_a = np.where(kinds == EDGE_EDGE, 2, 1)  # edge-edge: two nodes on side A; otherwise the vertex
+    mask = np.arange(6)[None, :] < n_a[:, None]
+    return -(local_force * mask[:, :, None]).sum(axis=1)
+
+
+@njit(cache=True)
+def contact_points(x, ints, floats):
+    """Contact point on side B of every pair (m, 3): sum of -w_i x_i over B's nodes."""
+    out = np.zeros((len(ints), 3))
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    for c in range(len(ints)):
+        w = pair_weights(ints[c, KIND], floats[c, C0], floats[c, C1], w0, D)
+        for i in range(N_NODES[ints[c, KIND]]):
+            if w[i] < 0.0:
+                for a in range(3):
+                    out[c, a] -= w[i] * x[ints[c, NODE0 + i], a]
+    return out

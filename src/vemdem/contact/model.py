@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .broad import candidate_pairs, grain_boxes
-from .forces import evaluate_contacts, local_tangent_matrix, scatter_local_forces
+from .forces import evaluate_contacts, force_on_side_a, local_tangent_matrix, scatter_local_forces
 from .friction import FrictionLaw, dissipative_terms
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE, vertex_face_lcp
@@ -82,6 +82,7 @@ class ContactResult:
     wall_reactions: np.ndarray  # (n_walls, 3) force of the grains on each wall
     trial_history: ContactHistory
     dissipation_power: float  # -F . v of damping and friction at this state (>= 0)
+    pair_force: np.ndarray  # (m, 3) physical force on side A of each pair (normal + damping + friction)
 
     @property
     def n_contacts(self) -> int:
@@ -203,6 +204,7 @@ class ContactModel:
         found, c_prev, gt_prev, stick_prev = history.lookup(keys)
         stick_now, gt_now = stick_prev.copy(), np.zeros((len(ints), 3))
         power = 0.0
+        pair_force = force_on_side_a(ints, conservative.local_force)
         if self.friction.active and len(ints):
             v_all = np.zeros_like(x_all)
             if v is not None:
@@ -216,6 +218,7 @@ class ContactModel:
             scatter_local_forces(ints, local_force, extra)
             residual = residual + extra
             power = float(np.sum(extra * v_all))
+            pair_force = pair_force + force_on_side_a(ints, local_force)
             if tangent:
                 K = K + local_tangent_matrix(ints, local_tangent, n_all)
         reactions = self._wall_reactions(residual)
@@ -224,7 +227,8 @@ class ContactModel:
         trial = ContactHistory(keys, floats[:, :2].copy(), gt_now, stick_now)
         order = np.argsort(keys, kind="stable")
         trial = ContactHistory(keys[order], trial.c_prev[order], trial.gt[order], trial.stick[order])
-        return ContactResult(conservative.total_energy, residual[:N], K_grains, ints, floats, reactions, trial, power)
+        return ContactResult(conservative.total_energy, residual[:N], K_grains, ints, floats, reactions, trial, power,
+                             pair_force)  # fmt: skip
 
     def _wall_velocities(self, t):
         vel = [np.repeat(m.motion.velocity(t)[None, :], len(m.vertices), axis=0) for m in self.meshes]

@@ -13,15 +13,21 @@ class CsvLog:
     """A CSV file with a fixed header, flushed after every row so an interrupted run keeps
     everything it computed."""
 
-    def __init__(self, path: Path, header: list[str]):
+    def __init__(self, path: Path, header: list[str], mode: str = "w"):
+        """mode "w" starts the file with its header; "a" appends to one (a resumed run)."""
         self.path = Path(path)
-        self._fh = self.path.open("w", newline="")
-        self._writer = csv.writer(self._fh)
-        self._writer.writerow(header)
+        self._fh = self.path.open(mode, newline="")
+        self._writer = csv.writer(self._fh, lineterminator="\n")
+        if mode == "w":
+            self._writer.writerow(header)
         self._fh.flush()
 
     def write(self, *row) -> None:
         self._writer.writerow([_plain(v) for v in row])
+        self._fh.flush()
+
+    def write_rows(self, rows) -> None:
+        self._writer.writerows([[_plain(v) for v in row] for row in rows])
         self._fh.flush()
 
     def close(self) -> None:

@@ -10,20 +10,28 @@ import numpy as np
 
 
 class PvdSeries:
-    def __init__(self, out_dir: Path, name: str):
+    """keep: resume an existing series, keeping its first `keep` frames."""
+
+    def __init__(self, out_dir: Path, name: str, keep: int | None = None):
         self.out_dir = Path(out_dir)
         self.name = name
         self.frames: list[tuple[float, str]] = []
         (self.out_dir / name).mkdir(parents=True, exist_ok=True)
+        if keep is not None and (self.out_dir / f"{name}.pvd").is_file():
+            self.frames = _read_pvd(self.out_dir / f"{name}.pvd")[:keep]
 
-    def write(self, time: float, points: np.ndarray, triangles: np.ndarray, point_data=None, cell_data=None):
+    def write(self, time: float, points: np.ndarray, cells, point_data=None, cell_data=None):
+        """cells: triangles (m, 3), or a list of (cell type, connectivity) blocks; cell_data values
+        are one array (one block) or a list with one array per block."""
         rel = f"{self.name}/{self.name}_{len(self.frames):05d}.vtu"
-        cells = [("triangle", np.asarray(triangles))]
+        if isinstance(cells, np.ndarray):
+            cells = [("triangle", cells)]
+        blocks = [(kind, np.asarray(conn)) for kind, conn in cells]
         mesh = meshio.Mesh(
             np.asarray(points, float),
-            cells,
+            blocks,
             point_data=point_data or {},
-            cell_data={k: [np.asarray(v)] for k, v in (cell_data or {}).items()},
+            cell_data={k: (list(v) if isinstance(v, list) else [np.asarray(v)]) for k, v in (cell_data or {}).items()},
         )
         mesh.write(self.out_dir / rel, binary=True)
         self.frames.append((float(time), rel))
@@ -35,3 +43,10 @@ class PvdSeries:
             lines.append(f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(rel)}/>')
         lines += ["  </Collection>", "</VTKFile>", ""]
         (self.out_dir / f"{self.name}.pvd").write_text("\n".join(lines))
+
+
+def _read_pvd(path: Path) -> list[tuple[float, str]]:
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(path).getroot()
+    return [(float(d.get("timestep")), d.get("file")) for d in root.iter("DataSet")]

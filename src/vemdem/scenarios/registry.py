@@ -9,10 +9,12 @@ from ..config import ConfigError, apply_schema
 
 SCENARIOS = {
     "grain_compression": "vemdem.scenarios.grain_compression",
+    "scene": "vemdem.scenarios.scene",
 }
 
 EXAMPLES = {
     "grain_compression": "grain_compression.toml",
+    "drop": "drop.toml",
 }
 
 

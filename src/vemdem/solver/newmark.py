@@ -181,6 +181,7 @@ class StepControl:
     grow: float = 1.5
     easy_iterations: int = 4
     grow_after: int = 3
+    easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
 
 
 @dataclass
@@ -195,7 +196,6 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
             on_step=None, stats: RunStats | None = None) -> tuple[State, RunStats]:  # fmt: skip
     """Integrate from state.t to t_end; on_step(state, info, dt) after each accepted step."""
     stats = stats or RunStats()
-    easy_streak = 0
     while state.t < t_end * (1 - 1e-12):
         h = min(control.dt, t_end - state.t)
         try:
@@ -204,7 +204,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
             stats.rejected += 1
             stats.last_rejection = str(exc)
             control.dt = 0.5 * h
-            easy_streak = 0
+            control.easy_streak = 0
             if control.dt < control.dt_min:
                 raise TimeStepTooSmall(
                     f"time step {control.dt:.3g} s fell below the minimum {control.dt_min:.3g} s at t = {state.t:.6g} s "
@@ -214,10 +214,10 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         state = new
         stats.accepted += 1
         stats.newton_iterations += info.iterations
-        easy_streak = easy_streak + 1 if info.iterations <= control.easy_iterations else 0
-        if easy_streak >= control.grow_after and h == control.dt:
+        control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
+        if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)
-            easy_streak = 0
+            control.easy_streak = 0
         if on_step is not None:
             on_step(state, info, h)
     return state, stats

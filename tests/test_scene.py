@@ -1,0 +1,100 @@
+"""The general `scene` scenario: outputs (contracts), energy balance, determinism and --resume."""
+
+import csv
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from vemdem.cli import main
+from vemdem.scenarios import scene as scene_mod
+from vemdem.scenarios.registry import checked_config, example_text
+
+
+def drop_config(duration=0.004, every=1e-3, **solver):
+    raw = tomllib.loads(example_text("drop"))
+    raw["duration"] = duration
+    raw["output"] = {"every": every, "vtk": True}
+    raw["solver"].update(solver)
+    cfg, _ = checked_config(raw)
+    return cfg
+
+
+def rows(path):
+    with open(path) as fh:
+        return list(csv.reader(fh))
+
+
+def test_scene_outputs_follow_the_contract(tmp_path):
+    summary = scene_mod.run(drop_config(), tmp_path)
+    for key in ["scenario", "n_grains", "n_steps", "n_rejected_steps", "simulated_time", "wall_seconds"]:
+        assert key in summary
+    assert json.loads((tmp_path / "summary.json").read_text())["n_grains"] == 2
+    history = rows(tmp_path / "history.csv")
+    assert history[0] == ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts"]
+    assert len(history) == 1 + 5  # t = 0 and four frames
+    grains = rows(tmp_path / "grains.csv")
+    assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
+    assert len(grains) == 1 + 5 * 2
+    assert (tmp_path / "grains.pvd").is_file() and len(list((tmp_path / "grains").glob("*.vtu"))) == 5
+    assert summary["simulated_time"] == pytest.approx(0.004)
+
+
+def test_free_fall_energy_balance_and_centroids(tmp_path):
+    scene_mod.run(drop_config(duration=0.006), tmp_path)  # before the first impact
+    h = np.array(rows(tmp_path / "history.csv")[1:], float)
+    total = h[:, 1:6].sum(axis=1)
+    np.testing.assert_allclose(total, total[0], rtol=1e-7)
+    g = np.array(rows(tmp_path / "grains.csv")[1:], float)
+    cube = g[g[:, 1] == 1]
+    t = cube[:, 0]
+    np.testing.assert_allclose(cube[:, 4], 3.2e-3 - 0.05 * t - 0.5 * 9.81 * t**2, atol=1e-12)
+    np.testing.assert_allclose(cube[:, 7], -0.05 - 9.81 * t, atol=1e-10)
+
+
+def test_same_config_same_result(tmp_path):
+    cfg = drop_config(duration=0.014)
+    scene_mod.run(cfg, tmp_path / "a")
+    scene_mod.run(cfg, tmp_path / "b")
+    assert (tmp_path / "a/grains.csv").read_bytes() == (tmp_path / "b/grains.csv").read_bytes()
+
+
+def test_resume_continues_to_the_same_result(tmp_path, monkeypatch):
+    cfg = drop_config(duration=0.014)
+    scene_mod.run(cfg, tmp_path / "full")
+    # interrupt after the 8th frame (after the impact started), then resume
+    original = scene_mod.save_checkpoint
+    calls = {"n": 0}
+
+    def interrupting(*args, **kwargs):
+        original(*args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] == 9:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(scene_mod, "save_checkpoint", interrupting)
+    with pytest.raises(KeyboardInterrupt):
+        scene_mod.run(cfg, tmp_path / "cut")
+    monkeypatch.setattr(scene_mod, "save_checkpoint", original)
+    assert len(rows(tmp_path / "cut/grains.csv")) < len(rows(tmp_path / "full/grains.csv"))
+    scene_mod.run(cfg, tmp_path / "cut", resume=True)
+    for name in ("grains.csv", "history.csv"):
+        assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "full" / name).read_bytes()
+    assert len(list((tmp_path / "cut/grains").glob("*.vtu"))) == 15
+
+
+def test_resume_refuses_another_config(tmp_path, capsys):
+    cfg = drop_config(duration=0.002)
+    scene_mod.run(cfg, tmp_path)
+    from vemdem.config import ConfigError
+
+    with pytest.raises(ConfigError, match="different config"):
+        scene_mod.run(drop_config(duration=0.003), tmp_path, resume=True)
+
+
+def test_grain_behind_a_wall_is_a_config_error(tmp_path, capsys):
+    text = example_text("drop").replace("position = [0.0, 0.0, 1.2e-3]", "position = [0.0, 0.0, 0.2e-3]")
+    (tmp_path / "job.toml").write_text(text)
+    code = main(["run", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out"), "--quiet"])
+    assert code == 2 and "behind wall 'floor'" in capsys.readouterr().err
