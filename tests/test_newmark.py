@@ -48,3 +48,33 @@ def test_grain_dropped_on_floor_never_penetrates_and_bounces_back():
     t, z, vz = np.array(lowest).T
     assert z.min() > 0 and z.min() < gbar  # it reached the contact layer, never the floor
     assert vz[-1] > 0.5 * np.sqrt(2 * 9.81 * 0.1e-3)  # undamped: it comes back up
+
+
+def test_a_step_that_would_tunnel_is_rejected_and_nothing_overlaps():
+    """Two grains flying at each other 2 mm apart at 1 m/s with a 5 ms step (they would pass
+    through each other in one step): steps are rejected and halved, no accepted state overlaps."""
+    from vemdem.contact.narrow import edge_edge_closest, point_triangle_closest
+
+    a = cube(1e-3)
+    b = cube(1e-3).translated((2.0e-3, 0.1e-3, 0.05e-3))
+    law, _ = default_contact_laws(1e-3, MAT.E, MAT.density)
+    scene = Scene.build([a, b], MAT, law, FrictionLaw(), gravity=(0.0, 0.0, 0.0))
+    v0 = np.vstack([np.tile([0.5, 0, 0], (8, 1)), np.tile([-0.5, 0, 0], (8, 1))])
+    state = initial_state(scene, v0=v0)
+    ea, eb = a.edges(), b.edges()
+    distances = []
+
+    def on_step(s, info, h):
+        xa, xb = s.x[:8], s.x[8:]
+        d = min(
+            min(point_triangle_closest(p, *xb[f])[1] for p in xa for f in b.faces),
+            min(point_triangle_closest(p, *xa[f])[1] for p in xb for f in a.faces),
+            min(edge_edge_closest(xa[i], xa[j], xb[k], xb[l])[1] for i, j in ea for k, l in eb),
+        )
+        distances.append(d)
+
+    state, stats = advance(scene, state, 0.004, StepControl(dt=5e-3, dt_max=5e-3), NewmarkParameters(0.25, 0.5),
+                           on_step=on_step)  # fmt: skip
+    assert stats.rejected > 0
+    assert min(distances) > 0
+    assert state.v[:8, 0].mean() < 0  # they met and bounced apart

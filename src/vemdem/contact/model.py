@@ -132,9 +132,10 @@ class ContactModel:
         return np.ascontiguousarray(np.vstack([x, self.wall_nodes(t)]))
 
     # ------------------------------------------------------------------ search (once per step)
-    def search(self, x: np.ndarray, t: float) -> np.ndarray:
-        """Candidate surface pairs: grain-grain from the grid, grain-mesh-wall by boxes."""
-        gbar = self.law.activation_gap
+    def search(self, x: np.ndarray, t: float, margin: float = 0.0) -> np.ndarray:
+        """Candidate surface pairs: grain-grain from the grid, grain-mesh-wall by boxes. `margin`
+        widens the search by the distance grains may travel before the next search (a skin)."""
+        gbar = self.law.activation_gap + margin
         pairs = [candidate_pairs(x, self.vertex_ptr, gbar)]
         if self.meshes:
             x_all = self.all_positions(x, t)

@@ -106,7 +106,10 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     M = scene.mass_matrix()
     f_grav = scene.gravity_force().ravel()
     contact = scene.contact
-    candidates = contact.search(state.x, t1)
+    # search once per step, widened by twice the predicted travel so that pairs the step closes in on
+    # are candidates from the start (without it, a grain could only creep towards the gap)
+    travel = np.sqrt(np.max(np.sum((state.v * dt + 0.5 * state.a * dt * dt) ** 2, axis=1), initial=0.0))
+    candidates = contact.search(state.x, t1, margin=2.0 * travel)
     x = state.x.copy()
     size = float(np.cbrt(scene.elements.volume.mean()))
     for it in range(1, params.max_iterations + 1):
