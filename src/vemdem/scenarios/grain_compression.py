@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from ..geometry.shapes import rotation_matrix
 from ..geometry.submesh import METHODS
 from ..io.results import CsvLog, write_json
 from ..io.vtk import PvdSeries
-from ..solver.newton import solve_static
+from ..solver.newton import Assemble, solve_static
 from ..vem.element import (
     VemOptions,
     build_elements,
@@ -128,6 +129,55 @@ def prepare_grain(grain, mode: str):
     return turned, (a, b)
 
 
+def compress(
+    assemble: Assemble,
+    reference: np.ndarray,
+    plates: PlateSetup,
+    strains,
+    force_scale: float,
+    rtol: float = 1e-9,
+    max_iter: int = 40,
+    on_step: Callable | None = None,
+):
+    """Quasi-static plate compression of any discretisation (VEM, FE, ...) of one grain.
+
+    `assemble(xflat, want_tangent) -> (energy, residual, K)` is the discrete model on the nodes
+    `reference` (n, 3); `plates` says which of those dofs are prescribed. One Newton solve of
+    static equilibrium per entry of `strains` (the loaded steps, in order; the reference state
+    at strain 0 is not among them), the top plate at z = z_top - strain * h0. After each step
+    `on_step(k, strain, x, force, result)` is called (k counts from 1).
+    Returns (forces on the top plate at each strain, total Newton iterations).
+    """
+    X = np.asarray(reference, dtype=float)
+    x = X.ravel().copy()
+    top_z = 3 * plates.top + 2
+    forces, iterations = [], 0
+    for k, strain in enumerate(np.asarray(strains, dtype=float), start=1):
+        target = x.copy()
+        target[top_z] = X[plates.top, 2] - strain * plates.height
+        result = solve_static(
+            assemble, x, target, plates.free, force_scale, plates.height, rtol=rtol, max_iter=max_iter,
+        )  # fmt: skip
+        x = result.x
+        iterations += result.iterations
+        force = -result.residual[top_z].sum()
+        forces.append(force)
+        if on_step is not None:
+            on_step(k, strain, x, force, result)
+    return np.array(forces), iterations
+
+
+def vem_assembler(elements) -> Assemble:
+    """The one-element-per-grain VEM as an `assemble` callable for `compress` / `solve_static`."""
+
+    def assemble(xflat, want_tangent):
+        ev = evaluate(elements, xflat.reshape(-1, 3), force=True, tangent=want_tangent)
+        K = tangent_matrix(elements, ev.blocks) if want_tangent else None
+        return ev.total_energy, ev.force.ravel(), K
+
+    return assemble
+
+
 def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -140,36 +190,25 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     X = elements.reference
     plates = PlateSetup(X, mode, pins)
 
-    def assemble(xflat, want_tangent):
-        ev = evaluate(elements, xflat.reshape(-1, 3), force=True, tangent=want_tangent)
-        K = tangent_matrix(elements, ev.blocks) if want_tangent else None
-        return ev.total_energy, ev.force.ravel(), K
-
     steps = cfg["loading"]["steps"]
     strains = np.linspace(0.0, cfg["loading"]["max_strain"], steps + 1)
     force_scale = material.E * grain.volume ** (2 / 3)
-    x = X.ravel().copy()
-    top_z = 3 * plates.top + 2
     vtk = PvdSeries(out_dir, "grain") if cfg["output"]["vtk"] else None
-    forces, iterations = [0.0], 0
     with CsvLog(out_dir / "force_strain.csv", ["strain", "force"]) as log:
         log.write(0.0, 0.0)
-        _write_frame(vtk, 0.0, elements, grain, x)
-        for k in range(1, steps + 1):
-            target = x.copy()
-            target[top_z] = X[plates.top, 2] - strains[k] * plates.height
-            result = solve_static(
-                assemble, x, target, plates.free, force_scale, plates.height,
-                rtol=cfg["solver"]["rtol"], max_iter=cfg["solver"]["max_iterations"],
-            )  # fmt: skip
-            x = result.x
-            iterations += result.iterations
-            force = -result.residual[top_z].sum()
-            forces.append(force)
-            log.write(strains[k], force)
-            _write_frame(vtk, strains[k], elements, grain, x)
+        _write_frame(vtk, 0.0, elements, grain, X.ravel())
+
+        def on_step(k, strain, x, force, result):
+            log.write(strain, force)
+            _write_frame(vtk, strain, elements, grain, x)
             if progress:
-                progress(k, steps, f"strain {strains[k]:.3f} force {force:.4g} N ({result.iterations} Newton it.)")
+                progress(k, steps, f"strain {strain:.3f} force {force:.4g} N ({result.iterations} Newton it.)")
+
+        loaded, iterations = compress(
+            vem_assembler(elements), X, plates, strains[1:], force_scale,
+            rtol=cfg["solver"]["rtol"], max_iter=cfg["solver"]["max_iterations"], on_step=on_step,
+        )  # fmt: skip
+    forces = [0.0] + loaded.tolist()
     summary = {
         "scenario": "grain_compression",
         "mode": mode,
