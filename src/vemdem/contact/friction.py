@@ -30,7 +30,16 @@ import numpy as np
 from numba import njit, prange
 
 from .law import C2, EPS1, EPS2, GBAR, GBB, N1, N2
-from .narrow import EDGE_EDGE, N_NODES, VERTEX_EDGE, VERTEX_FACE, pair_weights
+from .narrow import (
+    EDGE_EDGE,
+    N_NODES,
+    VERTEX_EDGE,
+    VERTEX_FACE,
+    edge_edge_coords,
+    pair_weights,
+    vertex_edge_coord,
+    vertex_face_coords,
+)
 from .pairs import C0, C1, KIND, NODE0
 
 COMPLEX_STEP = 1e-30
@@ -78,33 +87,17 @@ def _law(d, p):
 
 @njit(cache=True)
 def _lcp_coords(kind, xs):
-    """The LCP solution (c0, c1) in closed form for real or complex positions (no range test)."""
+    """The LCP solution (c0, c1) for real or complex positions (no range test)."""
+    zero = 0.0 * xs[0, 0]
     if kind == VERTEX_FACE:
-        e1 = xs[2] - xs[1]
-        e2 = xs[3] - xs[1]
-        r = xs[0] - xs[1]
-        a11 = np.sum(e1 * e1)
-        a12 = np.sum(e1 * e2)
-        a22 = np.sum(e2 * e2)
-        b1 = np.sum(r * e1)
-        b2 = np.sum(r * e2)
-        det = a11 * a22 - a12 * a12
-        return (b1 * a22 - b2 * a12) / det, (b2 * a11 - b1 * a12) / det
+        u, v, _ = vertex_face_coords(xs[0], xs[1], xs[2], xs[3])
+        return u, v
     if kind == EDGE_EDGE:
-        da = xs[1] - xs[0]
-        db = xs[3] - xs[2]
-        r = xs[0] - xs[2]
-        aa = np.sum(da * da)
-        bb = np.sum(db * db)
-        ab = np.sum(da * db)
-        ra = np.sum(r * da)
-        rb = np.sum(r * db)
-        det = aa * bb - ab * ab
-        return (ab * rb - bb * ra) / det, (aa * rb - ab * ra) / det
+        s, t, _, _ = edge_edge_coords(xs[0], xs[1], xs[2], xs[3])
+        return s, t
     if kind == VERTEX_EDGE:
-        d = xs[2] - xs[1]
-        return np.sum((xs[0] - xs[1]) * d) / np.sum(d * d), 0.0 * xs[0, 0]
-    return 0.0 * xs[0, 0], 0.0 * xs[0, 0]
+        return vertex_edge_coord(xs[0], xs[1], xs[2]), zero
+    return zero, zero
 
 
 @njit(cache=True)

@@ -39,8 +39,9 @@ def _dot(a, b):
 
 
 @njit(cache=True)
-def vertex_face_lcp(p, t0, t1, t2):
-    """(in_range, u, v): closest point of the plane of the triangle to p, barycentric u, v."""
+def vertex_face_coords(p, t0, t1, t2):
+    """(u, v, det): barycentric coordinates of the projection of p on the triangle's plane, for
+    real or complex positions (the complex-step tangent of friction.py calls it too)."""
     e1 = t1 - t0
     e2 = t2 - t0
     r = p - t0
@@ -50,10 +51,40 @@ def vertex_face_lcp(p, t0, t1, t2):
     b1 = _dot(r, e1)
     b2 = _dot(r, e2)
     det = a11 * a22 - a12 * a12
+    return (b1 * a22 - b2 * a12) / det, (b2 * a11 - b1 * a12) / det, det
+
+
+@njit(cache=True)
+def vertex_edge_coord(p, e0, e1):
+    """t of the projection of p on the line through the edge (real or complex)."""
+    d = e1 - e0
+    return _dot(p - e0, d) / _dot(d, d)
+
+
+@njit(cache=True)
+def edge_edge_coords(a0, a1, b0, b1):
+    """(s, t, det, aa * bb): closest points of the two lines (real or complex)."""
+    da = a1 - a0
+    db = b1 - b0
+    r = a0 - b0
+    aa = _dot(da, da)
+    bb = _dot(db, db)
+    ab = _dot(da, db)
+    ra = _dot(r, da)
+    rb = _dot(r, db)
+    det = aa * bb - ab * ab
+    return (ab * rb - bb * ra) / det, (aa * rb - ab * ra) / det, det, aa * bb
+
+
+@njit(cache=True)
+def vertex_face_lcp(p, t0, t1, t2):
+    """(in_range, u, v): closest point of the plane of the triangle to p, barycentric u, v."""
+    e1 = t1 - t0
+    e2 = t2 - t0
+    det = _dot(e1, e1) * _dot(e2, e2) - _dot(e1, e2) ** 2
     if det <= 0.0:
         return False, 0.0, 0.0
-    u = (b1 * a22 - b2 * a12) / det
-    v = (b2 * a11 - b1 * a12) / det
+    u, v, _ = vertex_face_coords(p, t0, t1, t2)
     ok = u > RANGE_TOL and v > RANGE_TOL and u + v < 1.0 - RANGE_TOL
     return ok, u, v
 
@@ -62,10 +93,9 @@ def vertex_face_lcp(p, t0, t1, t2):
 def vertex_edge_lcp(p, e0, e1):
     """(in_range, t): closest point of the line through the edge to p."""
     d = e1 - e0
-    dd = _dot(d, d)
-    if dd <= 0.0:
+    if _dot(d, d) <= 0.0:
         return False, 0.0
-    t = _dot(p - e0, d) / dd
+    t = vertex_edge_coord(p, e0, e1)
     return RANGE_TOL < t < 1.0 - RANGE_TOL, t
 
 
@@ -74,17 +104,11 @@ def edge_edge_lcp(a0, a1, b0, b1):
     """(in_range, s, t): closest points of the two lines; never in range for (nearly) parallel edges."""
     da = a1 - a0
     db = b1 - b0
-    r = a0 - b0
     aa = _dot(da, da)
     bb = _dot(db, db)
-    ab = _dot(da, db)
-    det = aa * bb - ab * ab
-    if det <= PARALLEL_SIN2 * aa * bb:
+    if aa * bb - _dot(da, db) ** 2 <= PARALLEL_SIN2 * aa * bb:
         return False, 0.0, 0.0
-    ra = _dot(r, da)
-    rb = _dot(r, db)
-    s = (ab * rb - bb * ra) / det
-    t = (aa * rb - ab * ra) / det
+    s, t, _, _ = edge_edge_coords(a0, a1, b0, b1)
     ok = RANGE_TOL < s < 1.0 - RANGE_TOL and RANGE_TOL < t < 1.0 - RANGE_TOL
     return ok, s, t
 

@@ -254,6 +254,21 @@ def _evaluate_grains(
 
 
 @njit(cache=True)
+def _fold_virtual_columns(Ka, r, T, nv, nk, dst):
+    """dst[3w+j] += sum_k Ka[r, 3(nv+k)+j] T[k, w]: row r of Ka T, virtual columns only."""
+    n3 = 3 * nv
+    for k in range(nk):
+        a0 = Ka[r, n3 + 3 * k]
+        a1 = Ka[r, n3 + 3 * k + 1]
+        a2 = Ka[r, n3 + 3 * k + 2]
+        for w in range(nv):
+            t = T[k, w]
+            dst[3 * w] += a0 * t
+            dst[3 * w + 1] += a1 * t
+            dst[3 * w + 2] += a2 * t
+
+
+@njit(cache=True)
 def _condense_tangent(Ka, T, nv, nk, out):
     """out = T^T Ka T with T = [I; T_virtual] acting on each of x, y, z.
 
@@ -267,30 +282,14 @@ def _condense_tangent(Ka, T, nv, nk, out):
         return
     # vertex rows, virtual columns: out[r, 3w+j] += sum_k Ka[r, n3+3k+j] T[k, w]
     for r in range(n3):
-        for k in range(nk):
-            a0 = Ka[r, n3 + 3 * k]
-            a1 = Ka[r, n3 + 3 * k + 1]
-            a2 = Ka[r, n3 + 3 * k + 2]
-            for w in range(nv):
-                t = T[k, w]
-                out[r, 3 * w] += a0 * t
-                out[r, 3 * w + 1] += a1 * t
-                out[r, 3 * w + 2] += a2 * t
+        _fold_virtual_columns(Ka, r, T, nv, nk, out[r])
     # virtual rows condensed on the columns: C = Ka[virtual, vertex] + Ka[virtual, virtual] T
     C = np.empty((3 * nk, n3))
     for kr in range(3 * nk):
         r = n3 + kr
         for col in range(n3):
             C[kr, col] = Ka[r, col]
-        for k in range(nk):
-            a0 = Ka[r, n3 + 3 * k]
-            a1 = Ka[r, n3 + 3 * k + 1]
-            a2 = Ka[r, n3 + 3 * k + 2]
-            for w in range(nv):
-                t = T[k, w]
-                C[kr, 3 * w] += a0 * t
-                C[kr, 3 * w + 1] += a1 * t
-                C[kr, 3 * w + 2] += a2 * t
+        _fold_virtual_columns(Ka, r, T, nv, nk, C[kr])
     # out[3v+i, :] += sum_k T[k, v] C[3k+i, :]
     for k in range(nk):
         for v in range(nv):
