@@ -38,6 +38,9 @@ def test_scene_outputs_follow_the_contract(tmp_path):
     assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
     assert len(grains) == 1 + 5 * 2
     assert (tmp_path / "grains.pvd").is_file() and len(list((tmp_path / "grains").glob("*.vtu"))) == 5
+    walls = rows(tmp_path / "walls.csv")
+    assert walls[0] == ["time", "wall", "name", "fx", "fy", "fz"] and len(walls) == 1 + 5
+    assert walls[1][2] == "floor"
     assert summary["simulated_time"] == pytest.approx(0.004)
 
 
@@ -51,6 +54,28 @@ def test_free_fall_energy_balance_and_centroids(tmp_path):
     t = cube[:, 0]
     np.testing.assert_allclose(cube[:, 4], 3.2e-3 - 0.05 * t - 0.5 * 9.81 * t**2, atol=1e-12)
     np.testing.assert_allclose(cube[:, 7], -0.05 - 9.81 * t, atol=1e-10)
+
+
+def test_floor_carries_the_weight_at_rest(tmp_path):
+    """A grain settled on the floor: the floor's reaction equals its weight (static equilibrium).
+
+    With gamma = 0.5 Newmark's velocity-acceleration recursion has eigenvalues on the unit circle,
+    so a resting grain keeps a spurious, non-decaying velocity that the contact damping feels;
+    gamma = 0.6 (beta = (gamma + 1/2)^2 / 4) damps it, as a settling phase should."""
+    raw = tomllib.loads(example_text("drop"))
+    raw["grains"] = [raw["grains"][1]]
+    gbar = 0.01 * 1e-3 * (6 / np.pi) ** (1 / 3)  # default activation gap: 1 % of the equivalent diameter
+    raw["grains"][0].update({"position": [0.0, 0.0, 0.5e-3 + 0.9 * gbar], "rotation": [0.0, 0.0, 0.0],
+                             "velocity": [0.0, 0.0, 0.0]})  # fmt: skip
+    raw["contact"]["damping_ratio"] = 1.0
+    raw["solver"].update({"gamma": 0.6, "beta": 0.3025})
+    raw["duration"] = 0.03
+    raw["output"] = {"every": 0.01, "vtk": False}
+    cfg, _ = checked_config(raw)
+    scene_mod.run(cfg, tmp_path)
+    last = rows(tmp_path / "walls.csv")[-1]
+    weight = 2200.0 * 1e-9 * 9.81
+    assert float(last[5]) == pytest.approx(-weight, rel=1e-6)
 
 
 def test_same_config_same_result(tmp_path):
@@ -79,7 +104,7 @@ def test_resume_continues_to_the_same_result(tmp_path, monkeypatch):
     monkeypatch.setattr(scene_mod, "save_checkpoint", original)
     assert len(rows(tmp_path / "cut/grains.csv")) < len(rows(tmp_path / "full/grains.csv"))
     scene_mod.run(cfg, tmp_path / "cut", resume=True)
-    for name in ("grains.csv", "history.csv"):
+    for name in ("grains.csv", "history.csv", "walls.csv"):
         assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "full" / name).read_bytes()
     assert len(list((tmp_path / "cut/grains").glob("*.vtu"))) == 15
 

@@ -1,8 +1,9 @@
 """`scenario = "scene"`: any set of grains and walls under gravity, integrated in time.
 
 Outputs in DIR: summary.json, history.csv (energies), grains.csv (centroid position and velocity of
-every grain at every frame), grains.pvd + grains/*.vtu (ParaView), checkpoint.npz (the state at the
-last frame: `vemdem run ... --resume` continues from it to the same result).
+every grain at every frame), walls.csv (force of the grains on every wall at every frame),
+grains.pvd + grains/*.vtu (ParaView), checkpoint.npz (the state at the last frame:
+`vemdem run ... --resume` continues from it to the same result).
 """
 
 from __future__ import annotations
@@ -96,6 +97,7 @@ SCHEMA = {
 
 HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts"]
 GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
+WALLS_HEADER = ["time", "wall", "name", "fx", "fy", "fz"]  # force of the grains on each wall (N)
 
 
 # ---------------------------------------------------------------------------- building the scene
@@ -194,6 +196,8 @@ class FrameWriter:
         mode = "a" if resume_frames is not None else "w"
         self.history = CsvLog(out_dir / "history.csv", HISTORY_HEADER, mode)
         self.grains = CsvLog(out_dir / "grains.csv", GRAINS_HEADER, mode)
+        self.walls = CsvLog(out_dir / "walls.csv", WALLS_HEADER, mode)
+        self.wall_names = [m.name for m in scene.contact.meshes] + [p.name for p in scene.contact.planes]
         self.vtk = PvdSeries(out_dir, "grains", keep=resume_frames) if vtk else None
         n_grain_faces = scene.contact.topology.grain_face_ptr[scene.n_grains]
         self.faces = scene.contact.topology.faces[:n_grain_faces]
@@ -206,6 +210,8 @@ class FrameWriter:
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
         self.grains.write_rows([[state.t, g, *c[g], *vc[g]] for g in range(s.n_grains)])
+        self.walls.write_rows([[state.t, w, name, *contact_result.wall_reactions[w]]
+                               for w, name in enumerate(self.wall_names)])  # fmt: skip
         if self.vtk is not None:
             self._write_vtk(state, contact_result)
 
@@ -232,6 +238,7 @@ class FrameWriter:
     def close(self):
         self.history.close()
         self.grains.close()
+        self.walls.close()
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
@@ -248,7 +255,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     n_frames = int(np.ceil(duration / every - 1e-9))
     if resume:
         state, stats, frame = load_checkpoint(ckpt, control, fingerprint)
-        for name in ("history.csv", "grains.csv"):
+        for name in ("history.csv", "grains.csv", "walls.csv"):
             _truncate_csv(out_dir / name, state.t)
         writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=frame + 1)
     else:
