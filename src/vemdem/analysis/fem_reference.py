@@ -74,10 +74,12 @@ def mesh_grain(
     if not (np.isfinite(max_volume) and max_volume > 0):
         raise ValueError(f"max_volume must be positive, got {max_volume}")
     gen = tetgen.TetGen(np.asarray(grain.vertices, float), grain.faces.astype(np.int32))
-    # fixedvolume is TetGen's -a switch; without it maxvolume is silently ignored.
+    # fixedvolume is TetGen's -a switch; without it maxvolume is silently ignored. nomergefacet
+    # (-M): TetGen would otherwise merge nearly coplanar neighbouring triangles into one facet
+    # and put Steiner points on its average plane, changing the grain (seen on seed 2).
     options = dict(
         plc=True, quality=True, minratio=min_ratio, mindihedral=min_dihedral,
-        fixedvolume=True, maxvolume=float(max_volume), quiet=True,
+        fixedvolume=True, maxvolume=float(max_volume), nomergefacet=True, quiet=True,
     )  # fmt: skip
     if rim_size is None:
         nodes, elems = gen.tetrahedralize(**options)[:2]
