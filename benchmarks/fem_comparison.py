@@ -318,13 +318,13 @@ def report(seeds, modes, levels, uniform, study, fem, vem, reference, wall, solv
     w("![force vs strain](img/fem_comparison.png)\n")
     w("## Cost\n")
     w("FE wall time per compression run (8 load steps, all Newton iterations), graded meshes:\n")
-    w("| max tet volume | " + " | ".join(f"{m} (nodes, s)" for m in modes) + " |")
+    w("| max tet volume | " + " | ".join(f"{m}, seeds {', '.join(map(str, seeds))}" for m in modes) + " |")
     w("|---|" + "---|" * len(modes))
     for lv in levels:
         cells = []
         for m in modes:
             rs = [fem[sd, m, lv, True] for sd in seeds if not fem[sd, m, lv, True]["error"]]
-            cells.append(", ".join(f"{r['nodes']}, {r['seconds']:.0f}" for r in rs))
+            cells.append("; ".join(f"{r['nodes']} nodes {r['seconds']:.0f} s" for r in rs))
         w(f"| V/{1 / lv:.0f} | " + " | ".join(cells) + " |")
     w("")
     w("The sparse direct solve dominates (the element kernel and assembly take well under a second per "
