@@ -40,7 +40,7 @@ from .narrow import (
     vertex_edge_coord,
     vertex_face_coords,
 )
-from .pairs import C0, C1, KIND, NODE0
+from .pairs import KIND, NODE0
 
 COMPLEX_STEP = 1e-30
 

@@ -48,12 +48,14 @@ class ContactHistory:
 
     def lookup(self, keys: np.ndarray):
         """(found, c_prev, gt, stick) for each key; new pairs start from zero with stick."""
-        idx = np.searchsorted(self.keys, keys)
-        idx = np.minimum(idx, max(len(self.keys) - 1, 0))
-        found = (len(self.keys) > 0) & (self.keys[idx] == keys) if len(self.keys) else np.zeros(len(keys), bool)
-        c_prev = np.where(found[:, None], self.c_prev[idx] if len(self.keys) else 0.0, 0.0)
-        gt = np.where(found[:, None], self.gt[idx] if len(self.keys) else 0.0, 0.0)
-        stick = np.where(found, self.stick[idx] if len(self.keys) else True, True)
+        m = len(keys)
+        if len(self.keys) == 0:
+            return np.zeros(m, bool), np.zeros((m, 2)), np.zeros((m, 3)), np.ones(m, bool)
+        idx = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        found = self.keys[idx] == keys
+        c_prev = np.where(found[:, None], self.c_prev[idx], 0.0)
+        gt = np.where(found[:, None], self.gt[idx], 0.0)
+        stick = np.where(found, self.stick[idx], True)
         return found, c_prev, gt, stick
 
 
