@@ -2,17 +2,24 @@
 
     vemdem run CONFIG.toml --out DIR     run the scenario a config describes
     vemdem example [NAME]                print an example config (no NAME: list them)
+    vemdem sweep CONFIG.toml --set KEY=V1,V2,... [--set ...] [--zip] --out DIR
+                                         run one case per parameter set in parallel on Dask
+                                         (a local cluster, or --scheduler ADDRESS); writes
+                                         DIR/case_*/, DIR/sweep.csv and DIR/sweep.png
 
 Exit status: 0 done, 2 bad config (one line naming the key), 1 the run failed (the message
-names the cause; results written so far stay in DIR).
+names the cause; results written so far stay in DIR). A sweep exits 0 when some cases failed
+(their errors are in sweep.csv) and 1 only when all of them did.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
+from . import sweep
 from .config import ConfigError, load_toml
 from .scenarios.registry import EXAMPLES, checked_config, example_text
 
@@ -27,7 +34,30 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", action="store_true", help="continue an interrupted run from DIR/checkpoint.npz")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")
+    _add_sweep_parser(sub)
     return p
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _add_sweep_parser(sub) -> None:
+    sw = sub.add_parser("sweep", help="run a config for several parameter values in parallel (Dask)")
+    sw.add_argument("config", type=Path)
+    sw.add_argument("--set", action="append", required=True, metavar="KEY=V1,V2,...",
+                    help="a dotted config key and the values it takes (repeatable)")  # fmt: skip
+    sw.add_argument("--zip", action="store_true", help="pair the --set lists element-wise instead of all combinations")
+    sw.add_argument("--out", type=Path, required=True, metavar="DIR", help="output: a folder per case, sweep.csv")
+    sw.add_argument("--scheduler", metavar="ADDRESS", help="use this running Dask cluster instead of a local one")
+    sw.add_argument("--workers", type=_positive_int, default=os.cpu_count() or 1, metavar="N",
+                    help="worker processes of the local cluster (default: number of CPU cores)")  # fmt: skip
+    sw.add_argument("--plot-x", metavar="KEY", help="x of sweep.png (default: the last --set key)")
+    sw.add_argument("--plot-y", metavar="KEY", help="y of sweep.png, a summary field (default: the headline result)")
+    sw.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def _progress_bar(quiet: bool):
@@ -89,9 +119,34 @@ def cmd_example(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    try:
+        cases = sweep.plan_cases(load_toml(args.config), args.set, args.zip)
+    except ConfigError as exc:
+        print(f"vemdem: config error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out.resolve()
+    sweep.write_case_configs(cases, out)
+    try:
+        results = sweep.run_cases(cases, out, args.config.resolve().parent, args.scheduler, args.workers, args.quiet)
+    except (OSError, ValueError) as exc:  # no scheduler at that address, or no such address
+        print(f"vemdem: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    table = out / "sweep.csv"
+    sweep.write_table(table, cases, results)
+    note = sweep.plot_sweep(out / "sweep.png", cases, results, args.zip, args.plot_x, args.plot_y)
+    failed = sum(result["status"] != "ok" for result in results)
+    if failed:
+        print(f"vemdem: {failed} of {len(cases)} cases failed; their errors are in {table}", file=sys.stderr)
+    if not args.quiet:
+        print(note)
+        print(f"sweep: {len(cases)} cases, {len(cases) - failed} ok, {failed} failed; results in {table}")
+    return 1 if failed == len(cases) else 0
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
-    return {"run": cmd_run, "example": cmd_example}[args.command](args)
+    return {"run": cmd_run, "example": cmd_example, "sweep": cmd_sweep}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,324 @@
+"""Parameter sweeps: one config, some of its values varied, every case run in parallel on Dask.
+
+`--set KEY=V1,V2,...` names a dotted key of the TOML config and the values it takes. The cases
+are the Cartesian product of the lists (the last key varies fastest), or with `--zip` the lists
+paired element-wise. Every case config is checked against its scenario's schema before anything
+runs, so a typo costs seconds, not a cluster's worth of half-finished runs.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import itertools
+import json
+import re
+import sys
+import tomllib
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import ConfigError
+from .scenarios.registry import checked_config
+
+Scalar = bool | int | float | str
+
+# Cases run side by side, one per core: numba's own thread pool in each would oversubscribe them.
+WORKER_ENV = {"NUMBA_NUM_THREADS": "1"}
+
+_KEY = re.compile(r"[A-Za-z0-9_-]+(\.[A-Za-z0-9_-]+)*")
+# One comma-separated field: quoted TOML strings may hold commas, anything else may not.
+_FIELD = re.compile(r"""(?:"(?:[^"\\]|\\.)*"|'[^']*'|[^,"'])*""")
+# Names and paths may go unquoted (`grain.shape=cube,random`); anything else must be valid TOML.
+_BARE_WORD = re.compile(r"[\w.+\-/:~]+")
+_UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
+MAX_NAME = 100
+# Timings differ from run to run whatever the parameters: never the default thing to plot.
+NOT_PLOTTED = {"wall_seconds"}
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str  # folder name under the sweep's output folder
+    params: dict[str, Scalar]  # swept key -> value, in the order the keys were given
+    raw: dict  # the full config of this case, as `vemdem run` would read it
+
+
+def parse_value(token: str, key: str) -> Scalar:
+    """A TOML scalar (`0.9`, `true`, `"abc"`); a bare word that is not TOML is a string."""
+    token = token.strip()
+    if not token:
+        raise ConfigError(f"--set {key}: empty value in the list")
+    try:
+        value = tomllib.loads(f"v = {token}")["v"]
+    except tomllib.TOMLDecodeError:
+        if not _BARE_WORD.fullmatch(token):
+            raise ConfigError(f"--set {key}: {token} is not a TOML value (quote non-plain strings)") from None
+        return token
+    if not isinstance(value, (bool, int, float, str)):
+        raise ConfigError(f"--set {key}: {token} is not a number, string or boolean")
+    return value
+
+
+def _split_fields(text: str, key: str) -> list[str]:
+    fields, pos = [], 0
+    while True:
+        match = _FIELD.match(text, pos)
+        fields.append(match.group())
+        pos = match.end()
+        if pos == len(text):
+            return fields
+        if text[pos] != ",":
+            raise ConfigError(f"--set {key}: unbalanced quote in {text!r}")
+        pos += 1
+
+
+def parse_set(text: str) -> tuple[str, list[Scalar]]:
+    """`KEY=V1,V2,...` -> (KEY, [V1, V2, ...])."""
+    key, sep, values = text.partition("=")
+    key = key.strip()
+    if not sep:
+        raise ConfigError(f"--set {text!r}: expected KEY=V1,V2,...")
+    if not _KEY.fullmatch(key):
+        raise ConfigError(f"--set {text!r}: {key!r} is not a dotted key such as contact.mu_s")
+    if not values.strip():
+        raise ConfigError(f"--set {key}: no values given")
+    return key, [parse_value(field, key) for field in _split_fields(values, key)]
+
+
+def parse_sets(texts: list[str]) -> dict[str, list[Scalar]]:
+    sweeps: dict[str, list[Scalar]] = {}
+    for text in texts:
+        key, values = parse_set(text)
+        if key in sweeps:
+            raise ConfigError(f"--set {key}: given twice")
+        sweeps[key] = values
+    return sweeps
+
+
+def case_grid(sweeps: dict[str, list[Scalar]], zipped: bool) -> list[dict[str, Scalar]]:
+    """The parameter sets of the cases, in case order."""
+    keys = list(sweeps)
+    if zipped:
+        lengths = {len(v) for v in sweeps.values()}
+        if len(lengths) > 1:
+            given = ", ".join(f"{k}: {len(v)}" for k, v in sweeps.items())
+            raise ConfigError(f"--zip needs value lists of equal length, got {given}")
+        combos = zip(*sweeps.values())
+    else:
+        combos = itertools.product(*sweeps.values())
+    return [dict(zip(keys, combo)) for combo in combos]
+
+
+def _slot(node: Any, part: str, key: str) -> tuple[dict | list, str | int]:
+    """Where `part` of a dotted key lives in `node`: a table's key or an index into [[tables]]."""
+    if isinstance(node, dict):
+        return node, part
+    if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+        return node, int(part)
+    if isinstance(node, list):
+        raise ConfigError(f"--set {key}: {part!r} is not an index of the {len(node)} tables there")
+    raise ConfigError(f"--set {key}: {part!r} is below a value, not a table")
+
+
+def with_values(base: dict, params: dict[str, Scalar]) -> dict:
+    raw = copy.deepcopy(base)
+    for key, value in params.items():
+        *parents, last = key.split(".")
+        node: Any = raw
+        for part in parents:
+            container, slot = _slot(node, part, key)
+            if isinstance(container, dict):
+                container.setdefault(slot, {})
+            node = container[slot]
+        container, slot = _slot(node, last, key)
+        container[slot] = value
+    return raw
+
+
+def _label(value: Scalar) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def case_name(index: int, n_cases: int, params: dict[str, Scalar]) -> str:
+    """`case_000_mu_s=0.9_mu_d=0.8`: the index keeps names unique and sorted, the rest is for people."""
+    width = max(3, len(str(n_cases - 1)))
+    labels = [f"{key.rsplit('.', 1)[-1]}={_label(value)}" for key, value in params.items()]
+    return _UNSAFE.sub("_", "_".join([f"case_{index:0{width}d}", *labels]))[:MAX_NAME]
+
+
+def plan_cases(base: dict, set_args: list[str], zipped: bool) -> list[Case]:
+    """All cases, each config checked: a ConfigError here means nothing should run."""
+    grid = case_grid(parse_sets(set_args), zipped)
+    cases = [Case(case_name(i, len(grid), params), params, with_values(base, params)) for i, params in enumerate(grid)]
+    for case in cases:
+        try:
+            checked_config(case.raw)
+        except ConfigError as exc:
+            raise ConfigError(f"{case.name}: {exc}") from None
+    return cases
+
+
+def write_case_configs(cases: list[Case], out: Path) -> None:
+    """Written before anything runs, so even a case that dies with its worker can be re-run alone."""
+    for case in cases:
+        folder = out / case.name
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "config.json").write_text(json.dumps(case.raw, indent=2, default=str) + "\n")
+
+
+def flatten(summary: dict, prefix: str = "") -> dict[str, Scalar]:
+    """The scalar fields of a summary, nested tables as `a.b`; lists and the like are left out."""
+    flat: dict[str, Scalar] = {}
+    for key, value in summary.items():
+        if isinstance(value, np.generic):
+            value = value.item()  # np.int64 is no int: make it one, so it is kept and prints plainly
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{prefix}{key}."))
+        elif isinstance(value, (bool, int, float, str)):
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _failure(exc: BaseException) -> dict[str, str]:
+    return {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_case(raw_config: dict, out_dir: str, base_dir: str) -> dict:
+    """Run one case on a Dask worker. Never raises: one broken case must not end the sweep."""
+    try:
+        cfg, module = checked_config(raw_config)
+        summary = module.run(cfg, Path(out_dir), base_dir=Path(base_dir), progress=None)
+        return {**flatten(summary), "status": "ok"}
+    except Exception as exc:  # noqa: BLE001 - whatever went wrong belongs in this case's row
+        return _failure(exc)
+
+
+@contextmanager
+def dask_client(scheduler: str | None, workers: int) -> Iterator[Any]:
+    # Imported here: `vemdem run` should not pay for importing Dask.
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler) as client:
+            yield client
+        return
+    with (
+        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=WORKER_ENV) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def _result(future) -> dict:
+    """A case's result; a worker that died under it (out of memory, killed) makes it a failure."""
+    try:
+        return future.result()
+    except Exception as exc:  # noqa: BLE001 - Dask reports a lost worker with several exception types
+        return _failure(exc)
+
+
+def run_cases(
+    cases: list[Case], out: Path, base_dir: Path, scheduler: str | None, workers: int, quiet: bool
+) -> list[dict]:
+    """Results in case order, whatever order the workers finish in."""
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
+    results: list[dict] = [{} for _ in cases]
+    with dask_client(scheduler, workers) as client:
+        futures = client.map(
+            run_case,
+            [case.raw for case in cases],
+            [str(out / case.name) for case in cases],
+            [str(base_dir)] * len(cases),
+            pure=False,  # a re-run on a shared cluster must run again, not reuse a cached result
+        )
+        index = {future.key: i for i, future in enumerate(futures)}
+        with tqdm(total=len(cases), file=sys.stderr, disable=quiet, unit="case", dynamic_ncols=True) as bar:
+            for future in as_completed(futures):
+                i = index[future.key]
+                results[i] = _result(future)
+                bar.set_postfix_str(f"{cases[i].name}: {results[i]['status']}", refresh=False)
+                bar.update()
+    return results
+
+
+def summary_columns(results: list[dict], taken: set[str]) -> list[str]:
+    return sorted({key for result in results for key in result} - taken)
+
+
+def write_table(path: Path, cases: list[Case], results: list[dict]) -> None:
+    keys = list(cases[0].params)
+    fixed = ["case", *keys, "status", "error"]
+    header = fixed + summary_columns(results, set(fixed))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, header, lineterminator="\n")
+        writer.writeheader()
+        for case, result in zip(cases, results):
+            writer.writerow({**result, "case": case.name, **case.params, "error": result.get("error", "")})
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def default_plot_y(scenario: str, ok: list[dict]) -> str | None:
+    """The headline figure of a scenario, else the first numeric summary field (in the scenario's
+    order) that the sweep changes; measured floats before integers, which are mostly counts."""
+    if scenario == "pile_collapse" and any("angle_of_repose_deg" in r for r in ok):
+        return "angle_of_repose_deg"
+    varying = []
+    for key in ok[0] if ok else []:
+        values = [r[key] for r in ok if key in r]
+        if key not in NOT_PLOTTED and all(_is_number(v) for v in values) and len(set(values)) > 1:
+            varying.append((all(isinstance(v, int) for v in values), key))
+    return min(varying, key=lambda item: item[0])[1] if varying else None
+
+
+def plot_sweep(
+    path: Path, cases: list[Case], results: list[dict], zipped: bool, x: str | None = None, y: str | None = None
+) -> str:
+    """Plot y against x for the cases that ran; returns a line saying what was drawn, or why not."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    keys = list(cases[0].params)
+    ok = [(case, result) for case, result in zip(cases, results) if result.get("status") == "ok"]
+    x = x or keys[-1]
+    y = y or default_plot_y(str(cases[0].raw.get("scenario", "")), [result for _, result in ok])
+    rows = [{**result, **case.params} for case, result in ok]
+    rows = [r for r in rows if y and _is_number(r.get(x)) and _is_number(r.get(y))]
+    if not rows:
+        path.unlink(missing_ok=True)  # a plot left by an earlier sweep in DIR would pass for this one's
+        return f"no plot: no successful case has numeric values of {x} and {y or 'a varying summary field'}"
+    # A product sweep is a family of curves, one per setting of the other swept keys; in a zipped
+    # sweep all keys move together, so it is one curve.
+    others = [k for k in keys if k != x] if not zipped and x in keys else []
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row[k] for k in others), []).append(row)
+    fig = Figure(figsize=(6, 4.2), dpi=120)
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    for group, members in groups.items():
+        members.sort(key=lambda r: r[x])
+        label = ", ".join(f"{k}={_label(v)}" for k, v in zip(others, group)) or None
+        ax.plot([r[x] for r in members], [r[y] for r in members], "o-", ms=4, label=label)
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+    ax.grid(alpha=0.3)
+    if others:
+        ax.legend(fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path)
+    return f"plot: {path} ({y} against {x})"
