@@ -59,13 +59,18 @@ class Scene:
         """Nodal gravity load (N, 3) of the blended element (beta_e)."""
         return self.mass.load[:, None] * self.gravity[None, :]
 
-    def kinetic_energy(self, v: np.ndarray) -> float:
+    def kinetic_energy(self, v: np.ndarray, lumped: bool = False) -> float:
+        """1/2 v.M v with the consistent mass, or the lumped one (the explicit integrator's)."""
+        if lumped:
+            return 0.5 * float(np.sum(self.mass.lumped[:, None] * v * v))
         vf = v.ravel()
         return 0.5 * float(vf @ (self.mass_matrix() @ vf))
 
-    def gravity_energy(self, x: np.ndarray) -> float:
-        """Potential of gravity measured from the origin (z = 0 for vertical gravity)."""
-        return -float(np.sum(self.gravity_force() * x))
+    def gravity_energy(self, x: np.ndarray, lumped: bool = False) -> float:
+        """Potential of gravity measured from the origin (z = 0 for vertical gravity), with the
+        element's load vector or the lumped masses (the explicit integrator's)."""
+        weights = self.mass.lumped if lumped else self.mass.load
+        return -float(np.sum(weights[:, None] * self.gravity[None, :] * x))
 
     def grain_centroids(self, x: np.ndarray) -> np.ndarray:
         """Mass-weighted centre of each grain (lumped weights: exact for the centre of mass)."""

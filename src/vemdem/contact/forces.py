@@ -120,3 +120,25 @@ def contact_points(x, ints, floats):
                 for a in range(3):
                     out[c, a] -= w[i] * x[ints[c, NODE0 + i], a]
     return out
+
+
+@njit(cache=True)
+def gap_rates(x, v, ints, floats):
+    """d(gap)/dt of every pair: n . sum_i w_i v_i, n the unit gap vector sum_i w_i x_i / |.|
+    (negative: the two sides approach)."""
+    out = np.zeros(len(ints))
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    for c in range(len(ints)):
+        w = pair_weights(ints[c, KIND], floats[c, C0], floats[c, C1], w0, D)
+        d = np.zeros(3)
+        r = np.zeros(3)
+        for i in range(N_NODES[ints[c, KIND]]):
+            node = ints[c, NODE0 + i]
+            for a in range(3):
+                d[a] += w[i] * x[node, a]
+                r[a] += w[i] * v[node, a]
+        norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        if norm > 0.0:
+            out[c] = (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) / norm
+    return out

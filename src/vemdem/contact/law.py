@@ -83,3 +83,12 @@ def normal_potential(g, p):
     gbb, n2 = p[GBB], p[N2]
     penalty_part = p[EPS1] / (n1 + 1.0) * (p[GBAR] - gbb) ** (n1 + 1.0)
     return penalty_part + p[EPS2] / (n2 + 1.0) * (gbb ** (n2 + 1.0) - g ** (n2 + 1.0)) + p[C2] * (gbb - g)
+
+
+@njit(cache=True)
+def normal_stiffness(gaps, p):
+    """k(g) for an array of gaps (the explicit integrator's contact step limit)."""
+    out = np.empty(len(gaps))
+    for i in range(len(gaps)):
+        out[i] = normal_force(gaps[i], p)[1]
+    return out

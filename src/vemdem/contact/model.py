@@ -20,11 +20,11 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .broad import candidate_pairs, grain_boxes
-from .forces import evaluate_contacts, force_on_side_a, local_tangent_matrix, scatter_local_forces
+from .forces import evaluate_contacts, force_on_side_a, gap_rates, local_tangent_matrix, scatter_local_forces
 from .friction import FrictionLaw, dissipative_terms
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE, vertex_face_lcp
-from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
+from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
 from .topology import build_topology
 from .walls import MeshWall, PlaneWall
 
@@ -153,14 +153,21 @@ class ContactModel:
         return np.vstack(pairs).astype(np.int64)
 
     # ------------------------------------------------------------------ pairs at a state
-    def pairs(self, x: np.ndarray, t: float, candidates: np.ndarray):
+    def pairs(self, x: np.ndarray, t: float, candidates: np.ndarray, reach: float | None = None):
+        """Eligible pairs within the activation gap (or within `reach`, to look ahead)."""
         x_all = self.all_positions(x, t)
-        ints, floats = find_contacts(x_all, candidates, self.topology, self.law.activation_gap)
-        plane_ints, plane_floats = self._plane_pairs(x_all, t)
+        gbar = self.law.activation_gap if reach is None else reach
+        ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
+        plane_ints, plane_floats = self._plane_pairs(x_all, t, gbar)
         return x_all, np.vstack([ints, plane_ints]), np.vstack([floats, plane_floats])
 
-    def _plane_pairs(self, x_all, t):
-        gbar = self.law.activation_gap
+    def approaching(self, x, v, t, reach: float):
+        """(gap, gap rate, m_eq) of every pair closer than `reach` (the impact step limit)."""
+        x_all, ints, floats = self.pairs(x, t, self.search(x, t, margin=reach - self.law.activation_gap), reach)
+        v_all = np.vstack([v, self._wall_velocities(t)])
+        return floats[:, GAP], gap_rates(x_all, v_all, ints, floats), self.masses_of_pairs(ints)
+
+    def _plane_pairs(self, x_all, t, gbar):
         ints, floats = [np.zeros((0, INT_COLS), np.int64)], [np.zeros((0, FLOAT_COLS))]
         flags = np.zeros(self.n_vertices, np.bool_)
         signed = np.zeros(self.n_vertices)

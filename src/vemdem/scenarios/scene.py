@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..geometry.shapes import rotation_matrix
 from ..io.results import CsvLog, write_json
 from ..io.vtk import PvdSeries
 from ..scene import Scene
+from ..solver.explicit import ExplicitIntegrator, ExplicitParameters, advance_explicit, explicit_initial_state
 from ..solver.newmark import NewmarkParameters, RunStats, State, StepControl, advance, initial_state
 from ..vem.element import evaluate, projected_cauchy_stress
 from .grain_compression import MATERIAL_SCHEMA, VEM_SCHEMA, material_from, vem_options_from
@@ -70,13 +72,32 @@ CONTACT_SCHEMA = {
 }
 
 SOLVER_SCHEMA = {
-    "integrator": Field(("implicit",), "implicit", doc="implicit Newmark (explicit: not yet available)"),
+    "integrator": Field(("implicit", "explicit"), "implicit", doc="implicit Newmark or explicit central differences"),
     "beta": Field(float, 0.3, lambda v: None if 0 < v <= 0.5 else "must be in (0, 0.5]"),
     "gamma": Field(float, 0.5, lambda v: None if 0.5 <= v <= 1 else "must be in [0.5, 1]"),
     "dt": Field(float, 1e-5, positive, "initial time step (s)"),
     "dt_min": Field(float, 1e-10, positive, "the run stops below this step (s)"),
     "dt_max": Field(float, 1e-4, positive, "largest step (s)"),
     "max_iterations": Field(int, 15, positive, "Newton iterations before a step is rejected"),
+    "impact_steps": Field(
+        float, 0.0, _non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
+    ),
+    "entry_fraction": Field(
+        float,
+        0.05,
+        lambda v: None if 0 < v <= 1 else "must be in (0, 1]",
+        "implicit: share of the activation gap an approaching pair may close per step",
+    ),
+    "safety": Field(
+        float, 0.5, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "explicit: share of the critical step taken"
+    ),
+    "mass_damping": Field(float, 0.0, _non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
+    "mass_scaling": Field(
+        float,
+        1.0,
+        lambda v: None if v >= 1 else "must be >= 1",
+        "density factor for inertia, weight and contact scales (docs/dynamics.md)",
+    ),
 }
 
 SCHEMA = {
@@ -139,6 +160,9 @@ def build_walls(specs: list, base_dir):
 def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
     grains = [place_grain(g, base_dir) for g in cfg["grains"]]
     material = material_from(cfg)
+    # mass scaling: every mass-born quantity (inertia, weight, contact force scale) grows alike, so
+    # rigid-grain kinematics are unchanged and only the elastic (and explicit-step) time scales move
+    material = replace(material, density=material.density * cfg["solver"]["mass_scaling"])
     size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in grains]))
     overrides = {k: v for k, v in cfg["contact"].items() if k not in ("mu_s", "mu_d") and v is not None}
     try:
@@ -188,10 +212,38 @@ def _truncate_csv(path: Path, t_max: float):
     path.write_text("".join(keep))
 
 
+# ---------------------------------------------------------------------------- the integrator
+class Stepper:
+    """The integrator the config asks for, behind one interface (both share every force kernel)."""
+
+    def __init__(self, scene: Scene, s: dict):
+        self.scene = scene
+        self.explicit = s["integrator"] == "explicit"
+        self.control = StepControl(dt=s["dt"], dt_min=s["dt_min"], dt_max=s["dt_max"],
+                                   impact_steps=s["impact_steps"], entry_fraction=s["entry_fraction"])  # fmt: skip
+        if self.explicit:
+            self.integrator = ExplicitIntegrator(scene, ExplicitParameters(safety=s["safety"],
+                                                                           mass_damping=s["mass_damping"]))  # fmt: skip
+        else:
+            self.params = NewmarkParameters(beta=s["beta"], gamma=s["gamma"], max_iterations=s["max_iterations"],
+                                            mass_damping=s["mass_damping"])  # fmt: skip
+
+    def initial_state(self, v0) -> State:
+        if self.explicit:
+            return explicit_initial_state(self.scene, self.integrator, v0=v0)
+        return initial_state(self.scene, v0=v0)
+
+    def advance(self, state: State, t_end: float, on_step, stats: RunStats):
+        if self.explicit:
+            return advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
+        return advance(self.scene, state, t_end, self.control, self.params, on_step, stats)
+
+
 # ---------------------------------------------------------------------------- the run
 class FrameWriter:
-    def __init__(self, scene: Scene, out_dir: Path, vtk: bool, resume_frames: int | None):
+    def __init__(self, scene: Scene, out_dir: Path, vtk: bool, resume_frames: int | None, lumped: bool = False):
         self.scene = scene
+        self.lumped = lumped  # the explicit integrator's energies use its lumped mass
         self.out_dir = out_dir
         mode = "a" if resume_frames is not None else "w"
         self.history = CsvLog(out_dir / "history.csv", HISTORY_HEADER, mode)
@@ -205,7 +257,7 @@ class FrameWriter:
 
     def write(self, state: State, strain: float, contact_result):
         s = self.scene
-        self.history.write(state.t, s.kinetic_energy(state.v), strain, s.gravity_energy(state.x),
+        self.history.write(state.t, s.kinetic_energy(state.v, self.lumped), strain, s.gravity_energy(state.x, self.lumped),
                            contact_result.energy, state.dissipated, contact_result.n_contacts)  # fmt: skip
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
@@ -246,9 +298,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     scene, v0 = build_scene(cfg, base_dir)
-    s = cfg["solver"]
-    params = NewmarkParameters(beta=s["beta"], gamma=s["gamma"], max_iterations=s["max_iterations"])
-    control = StepControl(dt=s["dt"], dt_min=s["dt_min"], dt_max=s["dt_max"])
+    stepper = Stepper(scene, cfg["solver"])
+    control = stepper.control
     fingerprint = config_fingerprint(cfg)
     ckpt = out_dir / "checkpoint.npz"
     duration, every = cfg["duration"], cfg["output"]["every"]
@@ -257,14 +308,14 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         state, stats, frame = load_checkpoint(ckpt, control, fingerprint)
         for name in ("history.csv", "grains.csv", "walls.csv"):
             _truncate_csv(out_dir / name, state.t)
-        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=frame + 1)
+        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=frame + 1, lumped=stepper.explicit)
     else:
         try:
-            state = initial_state(scene, v0=v0)
+            state = stepper.initial_state(v0)
         except PenetrationError as exc:
             raise ConfigError(f"walls: a grain starts behind a wall ({exc})") from None
         stats, frame = RunStats(), 0
-        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=None)
+        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=None, lumped=stepper.explicit)
         writer.write(state, evaluate(scene.elements, state.x, force=False).total_energy, _contact_now(scene, state))
         save_checkpoint(ckpt, state, control, stats, frame, fingerprint)
     last = {}
@@ -277,9 +328,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
             t_next = min((frame + 1) * every, duration)
             t_wall = time.perf_counter()
             steps_before = stats.accepted
-            state, stats = advance(scene, state, t_next, control, params, on_step, stats)
+            state, stats = stepper.advance(state, t_next, on_step, stats)
             frame += 1
-            writer.write(state, last["info"].strain_energy, _contact_now(scene, state))
+            writer.write(state, last["info"].strain_energy, last["info"].contact)
             save_checkpoint(ckpt, state, control, stats, frame, fingerprint)
             if progress:
                 rate = (stats.accepted - steps_before) / max(time.perf_counter() - t_wall, 1e-9)
@@ -288,6 +339,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         writer.close()
     summary = {
         "scenario": "scene",
+        "integrator": cfg["solver"]["integrator"],
         "n_grains": scene.n_grains,
         "n_vertices": scene.n_vertices,
         "n_steps": stats.accepted,
@@ -296,9 +348,12 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": time.perf_counter() - t_start,
-        "contact": {"activation_gap": scene.contact.law.activation_gap, "penalty": scene.contact.law.penalty,
-                    "tangential_penalty": scene.contact.friction.tangential_penalty,
-                    "damping_ratio": scene.contact.friction.damping_ratio},  # fmt: skip
+        "contact": {
+            "activation_gap": scene.contact.law.activation_gap,
+            "penalty": scene.contact.law.penalty,
+            "tangential_penalty": scene.contact.friction.tangential_penalty,
+            "damping_ratio": scene.contact.friction.damping_ratio,
+        },  # fmt: skip
     }
     write_json(out_dir / "summary.json", summary)
     return summary

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..contact.law import normal_stiffness
 from ..contact.model import ContactHistory, PenetrationError
 from ..contact.pairs import GAP, GRAIN_A, GRAIN_B, find_contacts
 from ..scene import Scene
@@ -37,6 +38,7 @@ class NewmarkParameters:
     xtol: float = 1e-8  # correction, relative to the step's displacement (floor: 1e-6 grain size)
     max_iterations: int = 15
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
+    mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
 
 
 @dataclass
@@ -62,6 +64,7 @@ class StepInfo:
     wall_reactions: np.ndarray
     ints: np.ndarray
     floats: np.ndarray
+    contact: object = None  # the ContactResult at the accepted state (frames write it)
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
@@ -121,12 +124,12 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4, tangent=True)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
-        inertia = (M @ acc.ravel())
+        inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
         if not np.all(np.isfinite(R)):
             raise StepRejected("non-finite residual")
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
-        K = a1 * M + tangent_matrix(scene.elements, el.blocks) + cr.tangent
+        K = (a1 + params.mass_damping * a4) * M + tangent_matrix(scene.elements, el.blocks) + cr.tangent
         dx = -solve(K, R).reshape(-1, 3)
         alpha = min(1.0, params.ccd_fraction * _free_distance_ratio(scene, dx, cr.ints, cr.floats))
         x = x + alpha * dx
@@ -148,9 +151,9 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     except (InvertedElementError, PenetrationError) as exc:
         raise StepRejected(str(exc)) from None
     _night_owl_check(scene, x, t1, candidates)
-    power = cr.dissipation_power
+    power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
-    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats)
+    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr)
     return new, info
 
 
@@ -185,6 +188,35 @@ class StepControl:
     easy_iterations: int = 4
     grow_after: int = 3
     easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
+    impact_steps: float = 0.0  # > 0: impact step control on (formulation.md 5), see step_limit
+    entry_fraction: float = 0.05  # share of the activation gap a pair may enter in one step
+
+    def step_limit(self, scene: Scene, state: State) -> float:
+        """Contact-impact step control (formulation.md 5), from the state at the start of a step:
+        - an approaching pair (rate -dg/dt) may close at most `entry_fraction` f of the activation
+          gap inside the layer in one step: dt <= (max(g - gbar, 0) + f gbar) / (-dg/dt);
+        - an active pair resolves half its contact oscillation in `impact_steps` steps:
+          dt <= pi sqrt(m_eq / k(g)) / N_impact, k(g) the stiffness at the current gap.
+        Without it a step may jump deep into the layer, where the trapezoidal rule's energy error
+        at a stiff nonlinear spring is largest (measured in docs/dynamics.md). Floor: 10 dt_min."""
+        if self.impact_steps <= 0:
+            return np.inf
+        contact = scene.contact
+        gbar = contact.law.activation_gap
+        wall_speed = max((np.linalg.norm(w.motion.velocity(state.t)) for w in contact.planes + contact.meshes),
+                         default=0.0)  # fmt: skip
+        speed = np.sqrt(np.max(np.sum(state.v**2, axis=1))) + wall_speed
+        gap, rate, m_eq = contact.approaching(state.x, state.v, state.t, gbar + 2.0 * speed * self.dt_max)
+        limit = np.inf
+        closing = rate < 0
+        if closing.any():
+            depth = np.maximum(gap[closing] - gbar, 0.0) + self.entry_fraction * gbar
+            limit = np.min(depth / -rate[closing])
+        k = normal_stiffness(np.ascontiguousarray(gap), contact.law_params)
+        loaded = k > 0
+        if loaded.any():
+            limit = min(limit, np.pi * np.sqrt(np.min(m_eq[loaded] / k[loaded])) / self.impact_steps)
+        return max(limit, 10.0 * self.dt_min)
 
 
 @dataclass
@@ -199,8 +231,9 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
             on_step=None, stats: RunStats | None = None) -> tuple[State, RunStats]:  # fmt: skip
     """Integrate from state.t to t_end; on_step(state, info, dt) after each accepted step."""
     stats = stats or RunStats()
+    limit = control.step_limit(scene, state)
     while state.t < t_end * (1 - 1e-12):
-        h = min(control.dt, t_end - state.t)
+        h = min(control.dt, limit, t_end - state.t)
         try:
             new, info = newmark_step(scene, state, h, params)
         except (StepRejected, np.linalg.LinAlgError) as exc:
@@ -215,6 +248,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
                 ) from None
             continue
         state = new
+        limit = control.step_limit(scene, state)
         stats.accepted += 1
         stats.newton_iterations += info.iterations
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0

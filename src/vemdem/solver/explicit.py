@@ -1,0 +1,213 @@
+"""Explicit central differences with lumped mass (formulation.md 5; docs/dynamics.md).
+
+Velocity Verlet form, which is central differences for the positions and allows a step that
+changes from one step to the next:
+
+    v_half = v_n + dt/2 a_n,   x_{n+1} = x_n + dt v_half,
+    a_{n+1} = m^-1 [f_g - f_int(x_{n+1}) - r_c(x_{n+1}, v_half)],   v_{n+1} = v_half + dt/2 a_{n+1}
+
+m is the lumped (row-sum) mass; the velocity-dependent contact terms (damping, friction) see the
+half-step velocity. The forces are the same kernels as the implicit integrator's, without tangents.
+
+Stable step, recomputed every step (the safety factor covers the nonlinearity):
+    dt = safety * min(2/omega_grain, (sqrt(1 + zeta^2) - zeta) 2/omega_contact, approach limit)
+- omega_grain: the largest eigenvalue of each grain's (K, m) pair at rest, once per run;
+- omega_contact^2 = max over active pairs of k(g) (1/m_A + 1/m_B), m_A, m_B the smallest vertex
+  masses of the two sides (a wall has none), k(g) the current contact stiffness; the damping
+  ratio zeta shortens the step of a damped oscillator by the factor in front of it;
+- approach: no step may close more than `approach_fraction` of the smallest gap (or of the
+  activation gap for pairs not yet active), at the current vertex speeds.
+A step whose end state is not admissible (a vertex behind a wall, an inverted element, a non-finite
+force) is redone with half the step, as in the implicit integrator.
+
+Contact candidates are kept in a Verlet list: searched with a skin, searched again when the
+vertices (or the mesh walls) have moved half the skin since.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..contact.law import normal_stiffness
+from ..contact.model import PenetrationError
+from ..contact.pairs import GAP, GRAIN_A, GRAIN_B
+from ..scene import Scene
+from ..vem.element import InvertedElementError, evaluate
+from .newmark import (
+    RunStats,
+    State,
+    StepControl,
+    StepInfo,
+    StepRejected,
+    TimeStepTooSmall,
+    _free_distance_ratio,
+)
+
+
+@dataclass
+class ExplicitParameters:
+    safety: float = 0.5  # share of the critical step taken
+    approach_fraction: float = 0.25  # share of a gap a step may close
+    skin_gaps: float = 2.0  # Verlet skin, in activation gaps
+    mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha m v
+
+
+def grain_critical_steps(scene: Scene) -> np.ndarray:
+    """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the
+    tangent block of the grain, m its lumped vertex masses). Grains with the same number of
+    vertices are solved as one batch."""
+    el = scene.elements
+    blocks = evaluate(el, el.reference, force=False, tangent=True).blocks
+    counts = np.diff(el.vertex_ptr)
+    out = np.empty(scene.n_grains)
+    for n in np.unique(counts):
+        grains = np.flatnonzero(counts == n)
+        K = np.stack([blocks[el.block_ptr[g] : el.block_ptr[g + 1]] for g in grains]).reshape(-1, 3 * n, 3 * n)
+        m = np.stack([np.repeat(scene.mass.lumped[el.vertex_ptr[g] : el.vertex_ptr[g + 1]], 3) for g in grains])
+        s = 1.0 / np.sqrt(m)
+        lam = np.linalg.eigvalsh(s[:, :, None] * K * s[:, None, :])[:, -1]
+        out[grains] = 2.0 / np.sqrt(lam)
+    return out
+
+
+class ExplicitIntegrator:
+    """State that persists between steps of one run: critical steps, inverse masses, Verlet list."""
+
+    def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters()):
+        self.scene = scene
+        self.params = params
+        self.grain_dt = float(grain_critical_steps(scene).min())
+        self.inv_mass = 1.0 / scene.mass.lumped[:, None]
+        self.f_grav = scene.mass.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
+        vptr = scene.elements.vertex_ptr
+        self.min_vertex_mass = np.minimum.reduceat(scene.mass.lumped, vptr[:-1])
+        zeta = scene.contact.friction.damping_ratio
+        self.damping_factor = np.sqrt(1.0 + zeta * zeta) - zeta
+        self.skin = params.skin_gaps * scene.contact.law.activation_gap
+        self._candidates = None
+
+    # ---------------------------------------------------------------- Verlet list of candidates
+    def _wall_offsets(self, t):
+        return np.array([m.motion.displacement(t) for m in self.scene.contact.meshes]).reshape(-1, 3)
+
+    def reset_search(self):
+        self._candidates = None
+
+    def candidates(self, x, t):
+        c = self._candidates
+        if c is not None:
+            moved = np.sqrt(np.max(np.sum((x - c["x"]) ** 2, axis=1)))
+            walls = self._wall_offsets(t) - c["walls"]
+            moved += np.sqrt(np.max(np.sum(walls**2, axis=1), initial=0.0))
+            if moved <= 0.5 * self.skin:
+                return c["pairs"]
+        pairs = self.scene.contact.search(x, t, margin=self.skin)
+        self._candidates = {
+            "x": x.copy(),
+            "walls": self._wall_offsets(t),
+            "pairs": pairs,
+        }
+        return pairs
+
+    # ---------------------------------------------------------------- forces and the step
+    def forces(self, x, v, t, history):
+        """(acceleration, strain energy, contact result) at x with velocity v."""
+        scene = self.scene
+        el = evaluate(scene.elements, x)
+        cr = scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v)
+        acc = (self.f_grav - el.force - cr.force) * self.inv_mass - self.params.mass_damping * v
+        if not np.all(np.isfinite(acc)):
+            raise StepRejected("non-finite force")
+        return acc, el.total_energy, cr
+
+    def stable_step(self, state: State, ints, floats) -> float:
+        dt = self.grain_dt
+        G = self.scene.n_grains
+        if len(ints):
+            k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), self.scene.contact.law_params)
+            inv_m = 1.0 / self.min_vertex_mass[ints[:, GRAIN_A]]
+            gb = ints[:, GRAIN_B]
+            inv_m = inv_m + np.where(gb < G, 1.0 / self.min_vertex_mass[np.minimum(gb, G - 1)], 0.0)
+            omega = np.sqrt(np.max(k * inv_m))
+            if omega > 0:
+                dt = min(dt, self.damping_factor * 2.0 / omega)
+        dt *= self.params.safety
+        # time until two surfaces may touch at the current speeds (speeds stand for displacements)
+        reach = _free_distance_ratio(self.scene, state.v, ints, floats)
+        return min(dt, self.params.approach_fraction * reach)
+
+    def step(self, state: State, dt: float) -> tuple[State, StepInfo]:
+        v_half = state.v + 0.5 * dt * state.a
+        x = state.x + dt * v_half
+        t1 = state.t + dt
+        try:
+            acc, strain, cr = self.forces(x, v_half, t1, state.history)
+        except (InvertedElementError, PenetrationError) as exc:
+            raise StepRejected(str(exc)) from None
+        if len(cr.ints) and np.min(cr.floats[:, GAP]) <= 0:
+            raise StepRejected("a contact gap closed")
+        v = v_half + 0.5 * dt * acc
+        power = cr.dissipation_power + self.params.mass_damping * float(
+            np.sum(self.scene.mass.lumped[:, None] * v_half**2)
+        )
+        new = State(
+            t1,
+            x,
+            v,
+            acc,
+            cr.trial_history,
+            state.dissipated + 0.5 * dt * (state.power + power),
+            power,
+        )
+        info = StepInfo(
+            1,
+            cr.n_contacts,
+            cr.energy,
+            strain,
+            cr.wall_reactions,
+            cr.ints,
+            cr.floats,
+            cr,
+        )
+        return new, info
+
+
+def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None, v0=None, t0: float = 0.0) -> State:
+    x = scene.elements.reference.copy() if x0 is None else np.array(x0, float)
+    v = np.zeros_like(x) if v0 is None else np.array(v0, float)
+    acc, _, cr = integrator.forces(x, v, t0, None)
+    return State(t0, x, v, acc, cr.trial_history)
+
+
+def advance_explicit(integrator: ExplicitIntegrator, state: State, t_end: float, control: StepControl,
+                     on_step=None, stats: RunStats | None = None) -> tuple[State, RunStats]:  # fmt: skip
+    """Integrate from state.t to t_end with the stable step; control.dt_max caps it, control.dt_min
+    stops the run, control.dt reports the last step taken."""
+    stats = stats or RunStats()
+    integrator.reset_search()  # a fresh search at every call: a resumed run repeats it exactly
+    _, ints, floats = integrator.scene.contact.pairs(state.x, state.t, integrator.candidates(state.x, state.t))
+    while state.t < t_end * (1 - 1e-12):
+        h = min(integrator.stable_step(state, ints, floats), control.dt_max, t_end - state.t)
+        while True:
+            if h < control.dt_min:
+                raise TimeStepTooSmall(
+                    f"time step {h:.3g} s fell below the minimum {control.dt_min:.3g} s at t = {state.t:.6g} s "
+                    f"(last rejection: {stats.last_rejection or 'stable step limit'})"
+                )
+            try:
+                new, info = integrator.step(state, h)
+                break
+            except StepRejected as exc:
+                stats.rejected += 1
+                stats.last_rejection = str(exc)
+                h *= 0.5
+        state = new
+        ints, floats = info.ints, info.floats
+        control.dt = h
+        stats.accepted += 1
+        stats.newton_iterations += 1
+        if on_step is not None:
+            on_step(state, info, h)
+    return state, stats
