@@ -115,7 +115,7 @@ def solver_timing(study, level):
     import scipy.sparse as sp
 
     from vemdem.analysis.fem_reference import build_tet_model, reference_mesh
-    from vemdem.scenarios.grain_compression import PlateSetup, prepare_grain
+    from vemdem.solver.plates import PlateSetup, prepare_grain
     from vemdem.solver.linear import solve
 
     seed, mode = study
@@ -224,7 +224,7 @@ def report(seeds, modes, levels, uniform, study, fem, vem, reference, wall, solv
       f"{', '.join(map(str, seeds))}: flat caps at both ends. Material: compressible Neo-Hookean (paper eq. 2), "
       f"E = {E / 1e9:g} GPa, nu = {NU}.")  # fmt: skip
     w("- Boundary conditions: those of the `grain_compression` scenario, shared code "
-      "(`grain_compression.compress`, `PlateSetup`, `prepare_grain`): frictionless plates acting on the nodes "
+      "(`solver.plates.compress`, `PlateSetup`, `prepare_grain`): frictionless plates acting on the nodes "
       "initially on the caps (within 1e-6 h0 of min/max z): bottom u_z = 0, top u_z = -strain h0; `uniaxial` "
       "pins x, y of one plate vertex and y of another (rigid modes only); `confined` holds the lateral "
       "displacement of every node. In the FE model the plates hold *every* mesh node on the caps.")  # fmt: skip

@@ -13,7 +13,7 @@ scatter map computed once (the CSR pattern of the mesh), so no Python loop visit
 
 `compress_fem` and `compress_vem` run the plate compression of
 `vemdem.scenarios.grain_compression` (same grain orientation, plates, pins and Newton
-solver, `grain_compression.compress`) on the FE mesh and on the one-element VEM, so that
+solver, `solver.plates.compress`) on the FE mesh and on the one-element VEM, so that
 the two force-strain curves differ only by the discretisation. In the FE model the plates
 hold every mesh node on the grain's flat caps.
 
@@ -36,7 +36,7 @@ from numba import njit, prange
 
 from ..geometry.polyhedron import Polyhedron
 from ..geometry.submesh import signed_tet_volumes
-from ..scenarios.grain_compression import PLATE_TOL, PlateSetup, compress, prepare_grain, vem_assembler
+from ..solver.plates import PLATE_TOL, PlateSetup, compress, prepare_grain, vem_assembler
 from ..vem.element import InvertedElementError, VemOptions, build_elements, tet_gradients
 from ..vem.material import Material, neo_hooke
 

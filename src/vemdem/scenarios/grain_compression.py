@@ -13,24 +13,20 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from ..analysis.homogeneous import nominal_axial_stress
 from ..config import Field, REQUIRED, open_unit_interval, poisson, positive, unit_interval
 from ..geometry.factory import GRAIN_SCHEMA, make_grain
-from ..geometry.shapes import rotation_matrix
 from ..geometry.submesh import METHODS
 from ..io.results import CsvLog, write_json
 from ..io.vtk import PvdSeries
-from ..solver.newton import Assemble, solve_static
+from ..solver.plates import PlateSetup, compress, prepare_grain, vem_assembler
 from ..vem.element import (
     VemOptions,
     build_elements,
-    evaluate,
     projected_cauchy_stress,
-    tangent_matrix,
 )
 from ..vem.material import Material
 
@@ -39,6 +35,7 @@ MATERIAL_SCHEMA = {
     "nu": Field(float, REQUIRED, poisson, "Poisson's ratio"),
     "density": Field(float, 2200.0, positive, "kg/m^3"),
 }
+
 
 def stabilised(v):
     return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the element without stabilisation: singular stiffness)"
@@ -71,8 +68,6 @@ SCHEMA = {
     },
 }
 
-PLATE_TOL = 1e-6
-
 
 def material_from(cfg: dict) -> Material:
     m = cfg["material"]
@@ -82,100 +77,6 @@ def material_from(cfg: dict) -> Material:
 def vem_options_from(cfg: dict) -> VemOptions:
     v = cfg["vem"]
     return VemOptions(v["beta_internal"], v["beta_mass"], v["beta_load"], v["submesh"])
-
-
-class PlateSetup:
-    """Which dofs the plates and the rigid-mode pins prescribe."""
-
-    def __init__(self, vertices: np.ndarray, mode: str, pins: tuple[int, int] | None):
-        z = vertices[:, 2]
-        self.z0, self.height = z.min(), np.ptp(z)
-        tol = PLATE_TOL * self.height
-        self.bottom = np.flatnonzero(z <= self.z0 + tol)
-        self.top = np.flatnonzero(z >= z.max() - tol)
-        n = len(vertices)
-        fixed = np.zeros((n, 3), dtype=bool)
-        fixed[self.bottom, 2] = True
-        fixed[self.top, 2] = True
-        if mode == "confined":
-            fixed[:, :2] = True
-        else:
-            a, b = pins
-            fixed[a, :2] = True
-            fixed[b, 1] = True
-        self.free = ~fixed.ravel()
-
-    @staticmethod
-    def choose_pins(vertices: np.ndarray):
-        """A: first bottom vertex; B: plate vertex (or, failing that, any vertex) farthest from A
-        horizontally. Returns (A, B, angle that turns B - A onto +x)."""
-        z = vertices[:, 2]
-        tol = PLATE_TOL * np.ptp(z)
-        plate = np.flatnonzero((z <= z.min() + tol) | (z >= z.max() - tol))
-        a = plate[0]
-        d = np.linalg.norm(vertices[:, :2] - vertices[a, :2], axis=1)
-        candidates = plate if d[plate].max() > 1e-6 * np.ptp(z) else np.arange(len(vertices))
-        b = candidates[np.argmax(d[candidates])]
-        delta = vertices[b, :2] - vertices[a, :2]
-        return a, b, -np.arctan2(delta[1], delta[0])
-
-
-def prepare_grain(grain, mode: str):
-    """Turn the grain about z so that the pins line up with x (uniaxial mode)."""
-    if mode == "confined":
-        return grain, None
-    a, b, angle = PlateSetup.choose_pins(grain.vertices)
-    turned = grain.rotated(rotation_matrix([0.0, 0.0, angle]))
-    return turned, (a, b)
-
-
-def compress(
-    assemble: Assemble,
-    reference: np.ndarray,
-    plates: PlateSetup,
-    strains,
-    force_scale: float,
-    rtol: float = 1e-9,
-    max_iter: int = 40,
-    on_step: Callable | None = None,
-):
-    """Quasi-static plate compression of any discretisation (VEM, FE, ...) of one grain.
-
-    `assemble(xflat, want_tangent) -> (energy, residual, K)` is the discrete model on the nodes
-    `reference` (n, 3); `plates` says which of those dofs are prescribed. One Newton solve of
-    static equilibrium per entry of `strains` (the loaded steps, in order; the reference state
-    at strain 0 is not among them), the top plate at z = z_top - strain * h0. After each step
-    `on_step(k, strain, x, force, result)` is called (k counts from 1).
-    Returns (forces on the top plate at each strain, total Newton iterations).
-    """
-    X = np.asarray(reference, dtype=float)
-    x = X.ravel().copy()
-    top_z = 3 * plates.top + 2
-    forces, iterations = [], 0
-    for k, strain in enumerate(np.asarray(strains, dtype=float), start=1):
-        target = x.copy()
-        target[top_z] = X[plates.top, 2] - strain * plates.height
-        result = solve_static(
-            assemble, x, target, plates.free, force_scale, plates.height, rtol=rtol, max_iter=max_iter,
-        )  # fmt: skip
-        x = result.x
-        iterations += result.iterations
-        force = -result.residual[top_z].sum()
-        forces.append(force)
-        if on_step is not None:
-            on_step(k, strain, x, force, result)
-    return np.array(forces), iterations
-
-
-def vem_assembler(elements) -> Assemble:
-    """The one-element-per-grain VEM as an `assemble` callable for `compress` / `solve_static`."""
-
-    def assemble(xflat, want_tangent):
-        ev = evaluate(elements, xflat.reshape(-1, 3), force=True, tangent=want_tangent)
-        K = tangent_matrix(elements, ev.blocks) if want_tangent else None
-        return ev.total_energy, ev.force.ravel(), K
-
-    return assemble
 
 
 def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -> dict:
