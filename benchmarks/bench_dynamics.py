@@ -1,8 +1,10 @@
 """Dynamics throughput: both integrators on settling packs of sand grains in a box (issue 4).
 
     python benchmarks/bench_dynamics.py [--quick] [--grains 64,515,4096] [--integrator implicit|explicit|both]
-                                        [--steps-implicit 20] [--steps-explicit 500] [--budget 120]
-                                        [--no-solver] [--profile] [--json PATH]
+                                        [--steps-implicit 20] [--steps-explicit 500] [--impact-steps 0,20]
+                                        [--mass-scaling 1,1e4] [--budget 120] [--threads N]
+                                        [--linear-solver default|scipy|pardiso] [--no-solver] [--profile]
+                                        [--json PATH]
 
 For each pack size N and integrator: steps per second, grain-steps per second, mean active contact
 pairs, mean Newton iterations per step, mean time step and simulated time per wall second, measured
@@ -22,8 +24,10 @@ with contacts active from the first step, not a 0.15 s free fall of a 110 mm col
 
 Linear solver (with the implicit run of the pack nearest 515 grains): one Newton system of the real
 pack, K = a1 M + K_int + K_contact as `newmark_step` assembles it at the last accepted state, solved
-with SciPy's spsolve (what `vemdem.solver.linear` uses) and, if importable, pypardiso (a fresh solver
-each time, so that no factorisation is reused). Nothing here asserts a timing.
+with SciPy's spsolve (SuperLU, `vemdem.solver.linear`'s fallback) and, if importable, pypardiso (its
+default where installed; a fresh solver each time, so that no factorisation is reused). The share of
+each implicit case's wall time spent in the integrator's own linear solves is measured too. Results
+and their reading: docs/dynamics-benchmark.md. Nothing here asserts a timing.
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from vemdem.geometry.packing import column_packing, pack_height, packing_fractio
 from vemdem.scene import Scene
 from vemdem.solver import newmark
 from vemdem.solver.explicit import ExplicitIntegrator, advance_explicit, explicit_initial_state
-from vemdem.solver.newmark import NewmarkParameters, RunStats, StepControl, advance, initial_state
+from vemdem.solver.newmark import NewmarkParameters, RunStats, StepControl, TimeStepTooSmall, advance, initial_state
 from vemdem.vem.element import evaluate, tangent_matrix
 from vemdem.vem.material import Material
 
@@ -86,29 +90,27 @@ def deposit(grains: list[Polyhedron], floor: float, gap: float) -> list[Polyhedr
     """Drop every grain straight down, lowest first, until its hull is `gap` (vertically) above the
     floor or a grain already dropped. Hulls are exact here (sand grains are convex), so no two grains
     overlap; their Euclidean gap is at most the vertical one, so every resting contact is active."""
-    order = np.argsort([g.vertices[:, 2].min() for g in grains])
+    hulls = [ConvexHull(g.vertices).equations for g in grains]  # n.x + d <= 0 inside
+    bottoms = np.array([g.vertices[:, 2].min() for g in grains])
+    tops = np.array([g.vertices[:, 2].max() for g in grains])
     centres = np.array([g.centroid[:2] for g in grains])
     radii = np.array([np.linalg.norm(g.vertices[:, :2] - g.centroid[:2], axis=1).max() for g in grains])
-    placed: list[int] = []
-    out: list[Polyhedron | None] = [None] * len(grains)
-    halfspaces: dict[int, np.ndarray] = {}
-    for i in order:
-        g = grains[i]
-        bottom = g.vertices[:, 2].min()
-        drop = bottom - floor - gap
-        below = [j for j in placed if np.hypot(*(centres[i] - centres[j])) < radii[i] + radii[j]]
+    placed = np.zeros(len(grains), bool)
+    drops = np.zeros(len(grains))
+    for i in np.argsort(bottoms):
+        drop = bottoms[i] - floor - gap
+        near = placed & (np.hypot(*(centres - centres[i]).T) < radii + radii[i])
         # highest first: once a grain's top is below where this one would stop, none lower can stop it
-        for j in sorted(below, key=lambda j: -out[j].vertices[:, 2].max()):
-            if out[j].vertices[:, 2].max() + gap <= bottom - drop:
+        for j in sorted(np.flatnonzero(near), key=lambda j: -tops[j]):
+            if tops[j] + gap <= bottoms[i] - drop:
                 break
-            hi = halfspaces.setdefault(i, ConvexHull(g.vertices).equations)
-            lo = halfspaces.setdefault(j, ConvexHull(out[j].vertices).equations)
-            drop = min(drop, _vertical_clearance(hi, lo) - gap)
-        drop = max(drop, 0.0)
-        out[i] = g.translated((0.0, 0.0, -drop))
-        halfspaces.pop(i, None)  # translated: recomputed if a later grain needs it
-        placed.append(i)
-    return out
+            drop = min(drop, _vertical_clearance(hulls[i], hulls[j]) - gap)
+        drops[i] = max(drop, 0.0)
+        hulls[i] = hulls[i] + np.outer(hulls[i][:, 2] * drops[i], [0.0, 0.0, 0.0, 1.0])  # d - n.t, t = -drop e_z
+        bottoms[i] -= drops[i]
+        tops[i] -= drops[i]
+        placed[i] = True
+    return [g.translated((0.0, 0.0, -d)) for g, d in zip(grains, drops)]
 
 
 @dataclass
@@ -161,6 +163,7 @@ class Measurement:
     rejected: int = 0
     last_rejection: str = ""
     partial: bool = False  # stopped by the wall-time budget before its steps
+    failure: str = ""  # the integrator gave up (TimeStepTooSmall): the steps before it are kept
 
     @property
     def steps(self) -> int:
@@ -217,6 +220,8 @@ def measure_steps(advance_fn, state, n_steps: int, budget: float):
             advance_fn(state, on_step, stats)
         except _Enough:
             pass
+        except TimeStepTooSmall as exc:  # a finding to report, not a reason to lose the other cases
+            rec.partial, rec.failure = True, str(exc)
     rec.wall = time.perf_counter() - t0
     rec.solve_wall, rec.solves = solves.seconds, solves.calls
     rec.rejected, rec.last_rejection = stats.rejected, stats.last_rejection
@@ -253,12 +258,14 @@ class Case:
             "simulated_s_per_wall_s": float(np.sum(r.dts)) / wall,
             "rejected": r.rejected,
             "last_rejection": r.last_rejection,
+            "failure": r.failure,
             "linear_solve_s": r.solve_wall,
             "linear_solves": r.solves,
             "setup_s": self.setup,
             "warm_up": {"dt_s": self.warm_up.dts, "iterations": self.warm_up.iterations, "wall_s": self.warm_up.wall},
             "warm_up_rejected": self.warm_up.rejected,
             "stable_dt_s": self.stable_dt,
+            "per_step": {"dt_s": r.dts, "iterations": r.iterations, "contact_pairs": r.contacts},
         }
 
 
@@ -350,7 +357,7 @@ def compare_solvers(K, R, repeat: int = 3) -> dict:
     return out
 
 
-def profile_step(scene: Scene, state, dt: float, top: int = 12) -> str:
+def profile_step(scene: Scene, state, dt: float, top: int = 20) -> str:
     """cProfile of one implicit step (the one after the measured ones), sorted by cumulative time."""
     import cProfile
     import io
@@ -402,7 +409,7 @@ def print_table(rows: list[dict]):
     for row in rows:
         print("| " + " | ".join(_cells(row)) + " |")
     if any(r["partial"] for r in rows):
-        print("* stopped by the wall-time budget before its steps (--budget): partial figures")
+        print("* stopped by the wall-time budget before its steps (--budget) or by a failure: partial figures")
 
 
 def print_solver(out: dict):
@@ -520,6 +527,8 @@ def _record(case: Case, report: dict):
     print("  " + "  ".join(f"{h}: {c}" for (h, _, _), c in zip(COLUMNS, _cells(row))), flush=True)
     if row["rejected"]:
         print(f"    {row['rejected']} rejected steps, the last: {row['last_rejection']}", flush=True)
+    if row["failure"]:
+        print(f"    FAILED after {row['steps']} steps: {row['failure']}", flush=True)
 
 
 def main(argv=None):

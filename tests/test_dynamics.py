@@ -195,3 +195,14 @@ def test_explicit_and_implicit_agree_on_the_first_bounce():
     z_e_at_i = np.interp(t_i, t_e, z_e)
     drop = z_i[0] - z_i.min()
     assert np.max(np.abs(z_e_at_i - z_i)) < 0.02 * drop
+
+
+def test_explicit_takes_a_remainder_shorter_than_dt_min():
+    """Frames end at fixed times: the last step before one may be shorter than dt_min."""
+    scene = floor_scene(cube(1e-3), 0.2e-3, Material(90e9, 0.16, 2.2e7), damping_ratio=0.0)
+    integrator = ExplicitIntegrator(scene)
+    state = explicit_initial_state(scene, integrator)
+    t_end = 3 * integrator.params.safety * integrator.grain_dt + 5e-11
+    state, stats = advance_explicit(integrator, state, t_end, StepControl(dt_min=1e-10))
+    assert state.t == pytest.approx(t_end, rel=1e-12)
+    assert stats.rejected == 0

@@ -1,11 +1,12 @@
 """Sparse linear solves for Newton steps.
 
-Small systems (a single grain, a few grains) are solved densely. Larger ones go to MKL PARDISO
-through pypardiso where it is installed (a dependency on x86_64), SciPy's SuperLU otherwise.
-Measured (docs/fem_comparison.md, "Cost"; docs/dynamics-benchmark.md): PARDISO 0.80 s against
-SuperLU 3.91 s at 21,833 dofs, 8 s against 37 s at 35k; CHOLMOD (scikit-sparse) does not install
-from pip on a fresh machine. `VEMDEM_LINEAR_SOLVER=scipy` forces SuperLU (e.g. for bitwise
-reproducibility across machines: PARDISO's threaded factorisation need not be).
+Small systems (a single grain, a few grains) are solved densely, larger ones with SciPy's SuperLU.
+Measured on real Newton systems of settling packs (docs/dynamics-benchmark.md): SuperLU 0.36 s
+against MKL PARDISO 0.63 s at 46,350 dofs, 2.2-2.5 s against 5.5-6.3 s at 368,640 dofs (the
+nearly block-diagonal tangent creates no fill, and PARDISO's analysis phase dominates). PARDISO
+was faster only on the single-grain FE reference meshes (docs/fem_comparison.md), so it stays an
+option: `pip install vemdem[pardiso]` and `VEMDEM_LINEAR_SOLVER=pardiso`. CHOLMOD (scikit-sparse)
+does not install from pip on a fresh machine.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ DENSE_LIMIT = 600
 
 try:
     import pypardiso
-except ImportError:  # not on this platform: SuperLU
+except ImportError:  # optional (vemdem[pardiso])
     pypardiso = None
 
 
@@ -50,7 +51,7 @@ def solve(K, b: np.ndarray) -> np.ndarray:
 
 
 def sparse_backend() -> str:
-    if pypardiso is not None and os.environ.get("VEMDEM_LINEAR_SOLVER", "pardiso") != "scipy":
+    if pypardiso is not None and os.environ.get("VEMDEM_LINEAR_SOLVER", "scipy") == "pardiso":
         return "pardiso"
     return "scipy"
 
