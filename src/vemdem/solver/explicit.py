@@ -42,7 +42,7 @@ from .newmark import (
     StepInfo,
     StepRejected,
     TimeStepTooSmall,
-    _free_distance_ratio,
+    free_distance_ratio,
 )
 
 
@@ -135,7 +135,7 @@ class ExplicitIntegrator:
                 dt = min(dt, self.damping_factor * 2.0 / omega)
         dt *= self.params.safety
         # time until two surfaces may touch at the current speeds (speeds stand for displacements)
-        reach = _free_distance_ratio(self.scene, state.v, ints, floats)
+        reach = free_distance_ratio(self.scene, state.v, ints, floats)
         return min(dt, self.params.approach_fraction * reach)
 
     def step(self, state: State, dt: float) -> tuple[State, StepInfo]:

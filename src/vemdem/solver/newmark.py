@@ -79,7 +79,7 @@ def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
     return State(t0, x, v, a, contact.trial_history)
 
 
-def _free_distance_ratio(scene: Scene, dx, ints, floats):
+def free_distance_ratio(scene: Scene, dx, ints, floats):
     """Largest alpha such that x + alpha dx cannot bring two surfaces (grains, walls) into contact
     (conservative advancement): two surfaces with active pairs are at least their smallest active
     gap apart; any other two are at least the activation gap apart."""
@@ -131,7 +131,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
         K = (a1 + params.mass_damping * a4) * M + tangent_matrix(scene.elements, el.blocks) + cr.tangent
         dx = -solve(K, R).reshape(-1, 3)
-        alpha = min(1.0, params.ccd_fraction * _free_distance_ratio(scene, dx, cr.ints, cr.floats))
+        alpha = min(1.0, params.ccd_fraction * free_distance_ratio(scene, dx, cr.ints, cr.floats))
         x = x + alpha * dx
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
