@@ -17,13 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit
 
 from .broad import candidate_pairs, grain_boxes
 from .forces import evaluate_contacts, force_on_side_a, gap_rates, local_tangent_matrix, scatter_local_forces
 from .friction import FrictionLaw, dissipative_terms
 from .law import InterfaceLaw
-from .narrow import VERTEX_FACE, vertex_face_lcp
+from .narrow import VERTEX_FACE
 from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
 from .topology import build_topology
 from .walls import MeshWall, PlaneWall
@@ -64,9 +64,9 @@ def pair_keys(ints: np.ndarray) -> np.ndarray:
     return (ints[:, KIND] << 60) | (ints[:, FEATURE_A] << 30) | (ints[:, FEATURE_B] + (1 << 29))
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True)  # serial: a few flops per vertex, less than a parallel region's start-up on a busy machine
 def _plane_candidates(x, n_vertices, point, normal, gbar, flags, signed):
-    for v in prange(n_vertices):
+    for v in range(n_vertices):
         d = 0.0
         for a in range(3):
             d += (x[v, a] - point[a]) * normal[a]
@@ -189,11 +189,12 @@ class ContactModel:
             rec[:, FEATURE_B] = self.plane_face_base + w
             rec[:, NODE0] = verts
             rec[:, NODE0 + 1 : NODE0 + 4] = [n0, n0 + 1, n0 + 2]
-            fl = np.zeros((len(verts), FLOAT_COLS))
+            # the plane's triangle has orthogonal legs e1, e2 (_plane_frame), so the closest-point
+            # coordinates are plain projections (what vertex_face_lcp solves for a general triangle)
             tri = x_all[n0 : n0 + 3]
-            for k, v in enumerate(verts):  # small: only vertices within gbar of the plane
-                _, u, vv = vertex_face_lcp(x_all[v], tri[0], tri[1], tri[2])
-                fl[k] = (u, vv, signed[v])
+            e1, e2 = tri[1] - tri[0], tri[2] - tri[0]
+            r = x_all[verts] - tri[0]
+            fl = np.column_stack([r @ e1 / (e1 @ e1), r @ e2 / (e2 @ e2), signed[verts]])
             ints.append(rec)
             floats.append(fl)
         return np.vstack(ints), np.vstack(floats)

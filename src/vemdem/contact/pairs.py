@@ -137,20 +137,6 @@ def _box(x, v0, v1):
 
 
 @njit(cache=True)
-def _in_box(x, nodes, lo, hi):
-    """Does the box of the nodes' points meet the box [lo, hi]?"""
-    for a in range(3):
-        mn = np.inf
-        mx = -np.inf
-        for v in nodes:
-            mn = min(mn, x[v, a])
-            mx = max(mx, x[v, a])
-        if mx < lo[a] or mn > hi[a]:
-            return False
-    return True
-
-
-@njit(cache=True)
 def _region(x, A, B, vptr, gbar):
     """Part of grain A's box that lies within gbar of grain B's box."""
     loA, hiA = _box(x, vptr[A], vptr[A + 1])
@@ -161,11 +147,40 @@ def _region(x, A, B, vptr, gbar):
 
 
 @njit(cache=True)
+def _span_meets(x, nodes, m, lo, hi):
+    """Does the box of the first m of `nodes` meet [lo, hi]? (scalar loops: no temporaries)"""
+    for a in range(3):
+        mn = x[nodes[0], a]
+        mx = mn
+        for k in range(1, m):
+            mn = min(mn, x[nodes[k], a])
+            mx = max(mx, x[nodes[k], a])
+        if mx < lo[a] or mn > hi[a]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges):
-    vs = [v for v in range(vptr[A], vptr[A + 1]) if _in_box(x, np.array([v]), lo, hi)]
-    fs = [f for f in range(fptr[A], fptr[A + 1]) if _in_box(x, faces[f], lo, hi)]
-    es = [e for e in range(eptr[A], eptr[A + 1]) if _in_box(x, edges[e], lo, hi)]
-    return np.array(vs, dtype=np.int64), np.array(fs, dtype=np.int64), np.array(es, dtype=np.int64)
+    vs = np.empty(vptr[A + 1] - vptr[A], dtype=np.int64)
+    fs = np.empty(fptr[A + 1] - fptr[A], dtype=np.int64)
+    es = np.empty(eptr[A + 1] - eptr[A], dtype=np.int64)
+    one = np.empty(1, dtype=np.int64)
+    nv = nf = ne = 0
+    for v in range(vptr[A], vptr[A + 1]):
+        one[0] = v
+        if _span_meets(x, one, 1, lo, hi):
+            vs[nv] = v
+            nv += 1
+    for f in range(fptr[A], fptr[A + 1]):
+        if _span_meets(x, faces[f], 3, lo, hi):
+            fs[nf] = f
+            nf += 1
+    for e in range(eptr[A], eptr[A + 1]):
+        if _span_meets(x, edges[e], 2, lo, hi):
+            es[ne] = e
+            ne += 1
+    return vs[:nv], fs[:nf], es[:ne]
 
 
 @njit(cache=True)
@@ -185,6 +200,29 @@ def _record(ints, floats, n, cap, kind, A, B, fa, fb, nodes, c0, c1, gap):
 
 
 @njit(cache=True)
+def _point_near_tri(x, p, a, b, c, gbar):
+    """Is vertex p within gbar of the box of the triangle (a, b, c)? A scalar pre-test: the exact
+    gap functions allocate small arrays, and most feature pairs of two touching grains fail here."""
+    for k in range(3):
+        lo = min(x[a, k], x[b, k], x[c, k]) - gbar
+        hi = max(x[a, k], x[b, k], x[c, k]) + gbar
+        if x[p, k] < lo or x[p, k] > hi:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _segments_near(x, a0, a1, b0, b1, gbar):
+    """Do the boxes of segments (a0, a1) and (b0, b1) come within gbar? (pre-test, as above)"""
+    for k in range(3):
+        if max(x[a0, k], x[a1, k]) + gbar < min(x[b0, k], x[b1, k]):
+            return False
+        if max(x[b0, k], x[b1, k]) + gbar < min(x[a0, k], x[a1, k]):
+            return False
+    return True
+
+
+@njit(cache=True)
 def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
                         v_face_ptr, v_faces, v_edge_ptr, v_edges, ints, floats):  # fmt: skip
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
@@ -200,12 +238,16 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
         verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)
         for p in verts:
             for f in fcs:
+                if not _point_near_tri(x, p, faces[f, 0], faces[f, 1], faces[f, 2], gbar):
+                    continue
                 d, u, v = _vf_gap(x, p, f, faces, gbar)
                 if d >= 0.0:
                     nodes = np.array([p, faces[f, 0], faces[f, 1], faces[f, 2]])
                     n = _record(ints, floats, n, cap, VERTEX_FACE, ga, gb, p, f, nodes, u, v, d)
     for ea in eA:
         for eb in eB:
+            if not _segments_near(x, edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1], gbar):
+                continue
             d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
             if d >= 0.0:
                 nodes = np.array([edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]])
@@ -214,6 +256,8 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
         verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
         for p in verts:
             for e in eds:
+                if not _segments_near(x, p, p, edges[e, 0], edges[e, 1], gbar):
+                    continue
                 d, t = _ve_gap(x, p, e, edges, gbar)
                 if d >= 0.0 and _vertex_edge_survives(
                     x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar
@@ -222,7 +266,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                     n = _record(ints, floats, n, cap, VERTEX_EDGE, ga, gb, p, e, nodes, t, 0.0, d)
     for p in vA:
         for q in vB:
-            d = _norm(x[p] - x[q])
+            d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
             if d <= gbar and _vertex_vertex_survives(
                 x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar
             ):
