@@ -68,7 +68,9 @@ def _progress_bar(quiet: bool):
     bar = {}
 
     def update(done: int, total: int, text: str = ""):
-        if "bar" not in bar:
+        if "bar" not in bar or bar["bar"].total != total or done < bar["bar"].n:  # a new stage
+            if "bar" in bar:
+                bar["bar"].close()
             bar["bar"] = tqdm(total=total, file=sys.stderr, dynamic_ncols=True, leave=True)
         b = bar["bar"]
         b.update(done - b.n)

@@ -49,6 +49,7 @@ includes the column's own half width; `ReposeResult.runout_from(half_width)` sub
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -369,6 +370,30 @@ def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: st
     ax.set_xlabel(f"{distance_name} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     ax.set_title(f"{title}: angle of repose" if title else "angle of repose")
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, title: str = "", note: str = "") -> None:
+    """Side view of a heap without a fitted flank (too flat or too small to measure): every
+    centroid at (distance from the axis, height), with `note` saying why there is no fit."""
+    from .plots import plt  # the package's Agg backend
+
+    mm = 1e3
+    centroids = np.asarray(centroids, dtype=float)
+    distance = np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1])
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.scatter(distance * mm, centroids[:, 2] * mm, s=10, c="0.4", label="grain centroids")
+    ax.set_xlabel("distance from the axis (mm)")
+    ax.set_ylabel("height above the floor (mm)")
+    ax.set_title(title or "heap")
+    if note:
+        ax.text(0.02, 0.95, textwrap.fill(note, 70), transform=ax.transAxes, va="top", fontsize=8)
     ax.set_aspect("equal")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")

@@ -10,11 +10,19 @@ from ..config import ConfigError, apply_schema
 SCENARIOS = {
     "grain_compression": "vemdem.scenarios.grain_compression",
     "scene": "vemdem.scenarios.scene",
+    "pack": "vemdem.scenarios.pack",
+    "pile_collapse": "vemdem.scenarios.pile_collapse",
+    "lid_compression": "vemdem.scenarios.lid_compression",
 }
 
 EXAMPLES = {
     "grain_compression": "grain_compression.toml",
     "drop": "drop.toml",
+    "paper-pack": "paper-pack.toml",
+    "paper-collapse-high": "paper-collapse-high.toml",
+    "paper-collapse-mid": "paper-collapse-mid.toml",
+    "paper-collapse-low": "paper-collapse-low.toml",
+    "paper-compression": "paper-compression.toml",
 }
 
 

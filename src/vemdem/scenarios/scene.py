@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -157,8 +157,9 @@ def build_walls(specs: list, base_dir):
     return planes, meshes
 
 
-def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
-    grains = [place_grain(g, base_dir) for g in cfg["grains"]]
+def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scene:
+    """A scene of placed grains and walls with the config's material, vem, contact and solver
+    (mass scaling) settings; the contact laws' scales come from the mean grain size."""
     material = material_from(cfg)
     # mass scaling: every mass-born quantity (inertia, weight, contact force scale) grows alike, so
     # rigid-grain kinematics are unchanged and only the elastic (and explicit-step) time scales move
@@ -170,8 +171,13 @@ def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
                                              cfg["contact"]["mu_s"], cfg["contact"]["mu_d"], **overrides)  # fmt: skip
     except ValueError as exc:
         raise ConfigError(f"contact: {exc}") from None
+    return Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"], vem_options_from(cfg))
+
+
+def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
+    grains = [place_grain(g, base_dir) for g in cfg["grains"]]
     planes, meshes = build_walls(cfg["walls"], base_dir)
-    scene = Scene.build(grains, material, law, friction, planes, meshes, cfg["gravity"], vem_options_from(cfg))
+    scene = scene_from(grains, cfg, planes, meshes)
     v0 = np.vstack([np.tile(g["velocity"], (grain.n_vertices, 1)) for g, grain in zip(cfg["grains"], grains)])
     return scene, v0
 
@@ -228,10 +234,10 @@ class Stepper:
             self.params = NewmarkParameters(beta=s["beta"], gamma=s["gamma"], max_iterations=s["max_iterations"],
                                             mass_damping=s["mass_damping"])  # fmt: skip
 
-    def initial_state(self, v0) -> State:
+    def initial_state(self, v0=None, x0=None) -> State:
         if self.explicit:
-            return explicit_initial_state(self.scene, self.integrator, v0=v0)
-        return initial_state(self.scene, v0=v0)
+            return explicit_initial_state(self.scene, self.integrator, x0=x0, v0=v0)
+        return initial_state(self.scene, x0=x0, v0=v0)
 
     def advance(self, state: State, t_end: float, on_step, stats: RunStats):
         if self.explicit:
@@ -293,52 +299,73 @@ class FrameWriter:
         self.walls.close()
 
 
-def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
-    t_start = time.perf_counter()
+@dataclass
+class Run:
+    """What the shared time loop hands back to a scenario."""
+
+    state: State
+    stats: RunStats
+    stopped_early: bool  # `stop` ended the run before `duration`
+    last_contact: object  # the ContactResult at the last frame
+
+
+def simulate(scene: Scene, solver: dict, out_dir: Path, *, duration: float, every: float, vtk: bool,
+             fingerprint: str, x0=None, v0=None, resume: bool = False, progress=None, stop=None) -> Run:  # fmt: skip
+    """The time loop every dynamic scenario shares: a frame (history.csv, grains.csv, walls.csv,
+    ParaView) every `every` s up to `duration`, a checkpoint after each frame, and after each frame
+    `stop(state)` may end the run early (deterministic: a resumed run stops at the same frame)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    scene, v0 = build_scene(cfg, base_dir)
-    stepper = Stepper(scene, cfg["solver"])
+    stepper = Stepper(scene, solver)
     control = stepper.control
-    fingerprint = config_fingerprint(cfg)
     ckpt = out_dir / "checkpoint.npz"
-    duration, every = cfg["duration"], cfg["output"]["every"]
     n_frames = int(np.ceil(duration / every - 1e-9))
     if resume:
         state, stats, frame = load_checkpoint(ckpt, control, fingerprint)
         for name in ("history.csv", "grains.csv", "walls.csv"):
             _truncate_csv(out_dir / name, state.t)
-        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=frame + 1, lumped=stepper.explicit)
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=stepper.explicit)
+        last_contact = _contact_now(scene, state)
     else:
         try:
-            state = stepper.initial_state(v0)
+            state = stepper.initial_state(v0, x0)
         except PenetrationError as exc:
             raise ConfigError(f"walls: a grain starts behind a wall ({exc})") from None
         stats, frame = RunStats(), 0
-        writer = FrameWriter(scene, out_dir, cfg["output"]["vtk"], resume_frames=None, lumped=stepper.explicit)
-        writer.write(state, evaluate(scene.elements, state.x, force=False).total_energy, _contact_now(scene, state))
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=stepper.explicit)
+        last_contact = _contact_now(scene, state)
+        writer.write(state, evaluate(scene.elements, state.x, force=False).total_energy, last_contact)
         save_checkpoint(ckpt, state, control, stats, frame, fingerprint)
     last = {}
 
     def on_step(st, info, h):
         last["info"] = info
 
+    stopped = stop is not None and frame > 0 and stop(state)
     try:
-        while frame < n_frames:
+        while frame < n_frames and not stopped:
             t_next = min((frame + 1) * every, duration)
             t_wall = time.perf_counter()
             steps_before = stats.accepted
             state, stats = stepper.advance(state, t_next, on_step, stats)
             frame += 1
-            writer.write(state, last["info"].strain_energy, last["info"].contact)
+            last_contact = last["info"].contact
+            writer.write(state, last["info"].strain_energy, last_contact)
             save_checkpoint(ckpt, state, control, stats, frame, fingerprint)
             if progress:
                 rate = (stats.accepted - steps_before) / max(time.perf_counter() - t_wall, 1e-9)
                 progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, dt = {control.dt:.2e} s")
+            stopped = stop is not None and stop(state)
     finally:
         writer.close()
-    summary = {
-        "scenario": "scene",
+    return Run(state, stats, bool(stopped), last_contact)
+
+
+def run_summary(scenario: str, cfg: dict, scene: Scene, run: Run, t_start: float) -> dict:
+    """The summary fields every dynamic scenario writes."""
+    stats, state = run.stats, run.state
+    return {
+        "scenario": scenario,
         "integrator": cfg["solver"]["integrator"],
         "n_grains": scene.n_grains,
         "n_vertices": scene.n_vertices,
@@ -355,7 +382,16 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
             "damping_ratio": scene.contact.friction.damping_ratio,
         },  # fmt: skip
     }
-    write_json(out_dir / "summary.json", summary)
+
+
+def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
+    t_start = time.perf_counter()
+    scene, v0 = build_scene(cfg, base_dir)
+    result = simulate(scene, cfg["solver"], out_dir, duration=cfg["duration"], every=cfg["output"]["every"],
+                      vtk=cfg["output"]["vtk"], fingerprint=config_fingerprint(cfg), v0=v0, resume=resume,
+                      progress=progress)  # fmt: skip
+    summary = run_summary("scene", cfg, scene, result, t_start)
+    write_json(Path(out_dir) / "summary.json", summary)
     return summary
 
 

@@ -42,7 +42,6 @@ from .newmark import (
     StepInfo,
     StepRejected,
     TimeStepTooSmall,
-    free_distance_ratio,
 )
 
 
@@ -134,9 +133,57 @@ class ExplicitIntegrator:
             if omega > 0:
                 dt = min(dt, self.damping_factor * 2.0 / omega)
         dt *= self.params.safety
-        # time until two surfaces may touch at the current speeds (speeds stand for displacements)
-        reach = free_distance_ratio(self.scene, state.v, ints, floats)
-        return min(dt, self.params.approach_fraction * reach)
+        return min(dt, self.approach_limit(state, ints, floats))
+
+    def approach_limit(self, state: State, ints, floats) -> float:
+        """Longest step in which no pair closes more than `approach_fraction` f of its gap inside
+        the activation layer: dt <= (max(d - gbar, 0) + f min(d, gbar)) / s for a pair at distance
+        d (at least) approaching at speed s (at most). Pairs outside the Verlet list cannot meet
+        before the list is refreshed, so only candidate pairs and the planes count, each with the
+        relative speed of its two sides: a column in free fall is not slowed by its own speed.
+        Speeds: grain centre velocity c plus r, the largest vertex speed about it."""
+        scene, f = self.scene, self.params.approach_fraction
+        gbar = scene.contact.law.activation_gap
+        G = scene.n_grains
+        vptr = scene.elements.vertex_ptr
+        v = state.v
+        c = scene.grain_centroids(v)
+        r = np.sqrt(np.maximum.reduceat(np.sum((v - np.repeat(c, np.diff(vptr), axis=0)) ** 2, axis=1), vptr[:-1]))
+        limit = np.inf
+        # grain-grain and grain-mesh candidates: not yet active means at least gbar apart
+        pairs = self._candidates["pairs"] if self._candidates is not None else np.zeros((0, 2), np.int64)
+        d = np.full(len(pairs), gbar)
+        if len(ints) and len(pairs):
+            width = G + len(scene.contact.meshes) + len(scene.contact.planes) + 1
+            key = pairs[:, 0] * width + pairs[:, 1]
+            active_key = ints[:, GRAIN_A] * width + ints[:, GRAIN_B]
+            active_key2 = ints[:, GRAIN_B] * width + ints[:, GRAIN_A]
+            order = np.argsort(key)
+            sorted_key = key[order]
+            for k in (active_key, active_key2):  # an active pair may list its grains either way round
+                pos = np.minimum(np.searchsorted(sorted_key, k), len(key) - 1)
+                hit = sorted_key[pos] == k
+                np.minimum.at(d, order[pos[hit]], floats[hit, GAP])
+        if len(pairs):
+            other = pairs[:, 1]
+            wall = other >= G
+            wall_v = self._mesh_velocities(state.t)
+            c_other = np.where(wall[:, None], wall_v[np.maximum(other - G, 0)] if len(wall_v) else 0.0,
+                               c[np.minimum(other, G - 1)])  # fmt: skip
+            speed = np.linalg.norm(c[pairs[:, 0]] - c_other, axis=1) + r[pairs[:, 0]] + np.where(wall, 0.0, r[np.minimum(other, G - 1)])
+            limit = _closing_time(d, speed, gbar, f)
+        # planes: each grain's lowest vertex over the plane, approaching with its normal speed
+        for plane in scene.contact.planes:
+            if not plane.motion.active(state.t):
+                continue
+            n = plane.normal
+            dist = np.minimum.reduceat((state.x - plane.point_at(state.t)) @ n, vptr[:-1])
+            speed = np.maximum(-(c @ n) + plane.motion.velocity(state.t) @ n, 0.0) + r
+            limit = min(limit, _closing_time(dist, speed, gbar, f))
+        return limit
+
+    def _mesh_velocities(self, t):
+        return np.array([m.motion.velocity(t) for m in self.scene.contact.meshes]).reshape(-1, 3)
 
     def step(self, state: State, dt: float) -> tuple[State, StepInfo]:
         v_half = state.v + 0.5 * dt * state.a
@@ -172,6 +219,15 @@ class ExplicitIntegrator:
             cr,
         )
         return new, info
+
+
+def _closing_time(d, speed, gbar, f) -> float:
+    """Smallest (max(d - gbar, 0) + f min(d, gbar)) / speed over pairs that approach."""
+    moving = speed > 0
+    if not moving.any():
+        return np.inf
+    d, speed = d[moving], speed[moving]
+    return float(np.min((np.maximum(d - gbar, 0.0) + f * np.minimum(d, gbar)) / speed))
 
 
 def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None, v0=None, t0: float = 0.0) -> State:

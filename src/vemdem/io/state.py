@@ -1,0 +1,65 @@
+"""A settled granular state on disk (`DIR/state.npz`), the hand-over between scenarios.
+
+`pack` writes one; `pile_collapse` and `lid_compression` start from it (`initial_state = "path"`).
+It holds what rebuilds the scene exactly: every grain's stress-free reference polyhedron (the
+grains are deformed in the settled state, and the virtual elements need their undeformed shape),
+the current vertex positions and velocities, and a JSON record of the box, the grain size and the
+material and contact settings the pack was made with.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry.polyhedron import Polyhedron
+
+FORMAT = "vemdem-state-1"
+
+
+@dataclass
+class GranularState:
+    grains: list[Polyhedron]  # stress-free reference shapes, in the frame they were built in
+    x: np.ndarray  # (N, 3) current vertex positions, grains in order
+    v: np.ndarray  # (N, 3) velocities
+    meta: dict  # box, floor, centre, grain_size, material, ... (JSON)
+
+
+class StateFileError(ValueError):
+    pass
+
+
+def save_state(path: Path, grains: list[Polyhedron], x: np.ndarray, v: np.ndarray, meta: dict) -> None:
+    n_v = np.array([g.n_vertices for g in grains])
+    n_f = np.array([len(g.faces) for g in grains])
+    tmp = Path(path).with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, format=FORMAT, vertices=np.vstack([g.vertices for g in grains]),
+                        faces=np.vstack([g.faces for g in grains]), vertex_count=n_v, face_count=n_f,
+                        x=np.asarray(x, float), v=np.asarray(v, float), meta=json.dumps(meta))  # fmt: skip
+    tmp.replace(path)  # atomic, like the checkpoints
+
+
+def load_state(path: Path) -> GranularState:
+    path = Path(path)
+    if not path.is_file():
+        raise StateFileError(f"initial_state: no state file at {path} (run a `pack` scenario first)")
+    try:
+        d = np.load(path)
+        if str(d["format"]) != FORMAT:
+            raise StateFileError(f"initial_state: {path} has format {d['format']}, expected {FORMAT}")
+        vptr = np.concatenate([[0], np.cumsum(d["vertex_count"])])
+        fptr = np.concatenate([[0], np.cumsum(d["face_count"])])
+        vertices, faces = d["vertices"], d["faces"]
+        grains = [Polyhedron(vertices[vptr[i] : vptr[i + 1]], faces[fptr[i] : fptr[i + 1]], f"grain {i} of {path.name}")
+                  for i in range(len(vptr) - 1)]  # fmt: skip
+        x, v, meta = d["x"], d["v"], json.loads(str(d["meta"]))
+    except (KeyError, ValueError, OSError) as exc:
+        if isinstance(exc, StateFileError):
+            raise
+        raise StateFileError(f"initial_state: {path} is not a vemdem state file ({exc})") from None
+    if x.shape != (vptr[-1], 3) or v.shape != x.shape or not np.all(np.isfinite(x)) or not np.all(np.isfinite(v)):
+        raise StateFileError(f"initial_state: {path} holds positions that do not match its grains or are not finite")
+    return GranularState(grains, x, v, meta)

@@ -1,0 +1,97 @@
+"""`scenario = "lid_compression"`: a rigid lid presses a settled pack and lifts off again (the
+paper's Fig. 7).
+
+The pack stays in its box (floor and four walls). A horizontal lid starts at `lid.start` above
+the floor (7 mm), moves down at `lid.speed` to `lid.end` (4.9 mm) and back up at the same speed.
+strain = (lid.start - lid height) / lid.start, force = the vertical force of the grains on the
+lid (N, positive when pushed up). Outputs in DIR: force_strain.csv (header `phase,strain,force`,
+one row per frame; phase `load` or `unload`), force_strain.png, summary.json (peak_force,
+hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured) and
+the scene outputs (walls.csv has the lid's force at every frame; `--resume` continues a run).
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.force_strain import cycle_figures, plot_force_strain, write_force_strain_csv
+from ..config import REQUIRED, ConfigError, Field, positive
+from ..contact.walls import Motion, PlaneWall
+from ..io.results import write_json
+from .granular import box_planes, common_tables, initial_state_from, pack_stage_schema
+from .pack import SCHEMA as PACK_SCHEMA
+from .scene import config_fingerprint, run_summary, scene_from, simulate
+
+SCHEMA = {
+    "scenario": Field(("lid_compression",), REQUIRED),
+    "initial_state": Field(str, "", doc="state.npz written by a pack run [settle the [pack] table first]"),
+    "pack": pack_stage_schema(PACK_SCHEMA),
+    "lid": {
+        "start": Field(float, 7e-3, positive, "lid height above the floor at the start and the end (m)"),
+        "end": Field(float, 4.9e-3, positive, "lowest lid height (m)"),
+        "speed": Field(float, 0.02, positive, "lid speed (m/s): slow against the grains' settling speed"),
+        "frames": Field(int, 100, positive, "frames (force samples) per phase"),
+    },
+    **common_tables(mu_s=0.15, mu_d=0.15, every=1e-3),
+}
+SCHEMA["output"] = {"vtk": SCHEMA["output"]["vtk"]}  # frames come from lid.frames
+
+
+def lid_wall(lid: dict, box, centre) -> tuple[PlaneWall, float]:
+    """The lid (normal down) and the duration of the cycle."""
+    if lid["end"] >= lid["start"]:
+        raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
+    half = (lid["start"] - lid["end"]) / lid["speed"]
+    motion = Motion((0.0, half, 2.0 * half), ((0.0, 0.0, 0.0), (0.0, 0.0, lid["end"] - lid["start"]), (0.0, 0.0, 0.0)))
+    point = np.array([centre[0], centre[1], lid["start"]])
+    return PlaneWall(point, np.array([0.0, 0.0, -1.0]), motion, "lid"), 2.0 * half
+
+
+def lid_curve(walls_csv: Path, lid: PlaneWall, start: float, turn: float):
+    """(phase, strain, force) of every frame, from the lid's rows of walls.csv."""
+    times, force = [], []
+    with walls_csv.open() as fh:
+        for row in csv.DictReader(fh):
+            if row["name"] == "lid":
+                times.append(float(row["time"]))
+                force.append(float(row["fz"]))
+    times = np.array(times)
+    height = start + np.array([lid.motion.displacement(t)[2] for t in times])
+    phase = np.where(times <= turn * (1 + 1e-12), "load", "unload")
+    return phase, (start - height) / start, np.array(force)
+
+
+def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
+    meta = initial.meta
+    if "box" not in meta:
+        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
+    lid, duration = lid_wall(cfg["lid"], meta["box"], meta["centre"])
+    top = float(initial.x[:, 2].max()) - meta["floor"]
+    if top >= cfg["lid"]["start"]:
+        raise ConfigError(f"lid.start: the pack reaches {top * 1e3:.3g} mm above the floor, above the lid's start "
+                          f"{cfg['lid']['start'] * 1e3:.3g} mm (settle fewer grains or raise lid.start)")  # fmt: skip
+    scene = scene_from(initial.grains, cfg, box_planes(tuple(meta["box"]), tuple(meta["centre"]), meta["floor"]) + [lid])
+    every = 0.5 * duration / cfg["lid"]["frames"]
+    result = simulate(scene, cfg["solver"], out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
+                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v, resume=resume,
+                      progress=progress)  # fmt: skip
+    phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
+    write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
+    try:
+        figures = cycle_figures(phase, strain, force, cfg["lid"]["start"])
+    except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
+        figures = {"cycle_error": str(exc)}
+    plot_force_strain(phase, strain, force, out_dir / "force_strain.png", figures if "peak_force" in figures else None)
+    summary = run_summary("lid_compression", cfg, scene, result, t_start)
+    summary.update(figures)
+    summary["pack_top"] = top
+    summary["initial_state"] = str(path)
+    write_json(out_dir / "summary.json", summary)
+    return summary

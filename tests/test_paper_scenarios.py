@@ -1,0 +1,143 @@
+"""The paper's three scenarios (pack, pile_collapse, lid_compression) with few grains.
+
+One small pack is settled once for the module and reused: the collapse and the compression start
+from its state file, as the documented 515-grain runs do (docs/results.md)."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from vemdem.analysis.force_strain import read_force_strain_csv
+from vemdem.config import ConfigError
+from vemdem.geometry.packing import pack_height
+from vemdem.geometry.polyhedron import Polyhedron
+from vemdem.io.state import load_state
+from vemdem.scenarios.registry import EXAMPLES, checked_config, example_text
+
+BOX = 5.5e-3
+
+
+def small(raw: dict) -> dict:
+    cfg, module = checked_config(raw)
+    return cfg, module
+
+
+@pytest.fixture(scope="module")
+def settled(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pack")
+    cfg, module = small({"scenario": "pack", "n_grains": 16, "seed": 3, "grains": {"vertices": 16},
+                         "box": {"width": BOX, "depth": BOX}, "output": {"vtk": False}})  # fmt: skip
+    summary = module.run(cfg, out)
+    return out, summary
+
+
+def test_pack_settles_without_overlap_and_reports_its_height(settled):
+    out, summary = settled
+    assert summary["settled"] and summary["kinetic_ratio"] < 1e-3
+    state = load_state(out / "state.npz")
+    assert len(state.grains) == summary["n_grains"] == 16
+    # independent of the scenario's lumped-mass centroids: exact volume centroids of the settled
+    # surfaces (geometry.packing.pack_height)
+    ptr = np.cumsum([0] + [g.n_vertices for g in state.grains])
+    now = [Polyhedron(state.x[a:b], g.faces) for g, a, b in zip(state.grains, ptr[:-1], ptr[1:])]
+    # (the lumped-mass centroids carry the VEM stabilised mass: measured 1.5e-4 apart)
+    assert summary["pack_height"] == pytest.approx(pack_height(now), rel=1e-3)
+    volume = sum(g.volume for g in now)
+    assert summary["packing_fraction"] == pytest.approx(volume / (BOX * BOX * summary["pack_height"]), rel=1e-3)
+    # a settled random pack of angular grains: looser than random close packing, denser than a column
+    assert 0.3 < summary["packing_fraction"] < 0.64
+    # inside the box and above the floor
+    half = 0.5 * BOX
+    assert state.x[:, 2].min() > 0 and np.abs(state.x[:, :2]).max() < half
+    # the grains came down: the pack is lower than the column it was placed as
+    assert state.x[:, 2].max() < 0.5 * summary["column_height"]
+
+
+def collapse(tmp_path, settled, mu_s, mu_d):
+    pack_dir, _ = settled
+    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(pack_dir / "state.npz"),
+                         "contact": {"mu_s": mu_s, "mu_d": mu_d}, "settle": {"max_time": 0.3},
+                         "output": {"vtk": False}})  # fmt: skip
+    out = tmp_path / f"collapse-{mu_s}"
+    return out, module.run(cfg, out)
+
+
+def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
+    _, pack = settled
+    high_dir, high = collapse(tmp_path, settled, 0.9, 0.8)
+    low_dir, low = collapse(tmp_path, settled, 0.3, 0.2)
+    for out, s in ((high_dir, high), (low_dir, low)):
+        assert (out / "pile.png").stat().st_size > 10_000
+        assert s["runout"] > 0  # grains left the footprint of the removed walls
+        assert s["pile_height"] < pack["pack_height"] * 1.2
+        final = load_state(out / "state.npz")
+        assert final.x[:, 2].min() > 0
+    # less friction: a flatter, wider heap (the paper's Figs. 3-5)
+    assert low["pile_height"] < high["pile_height"]
+    assert low["runout"] > high["runout"]
+
+
+def test_lid_compression_cycle(tmp_path, settled):
+    pack_dir, _ = settled
+    state = load_state(pack_dir / "state.npz")
+    top = float(state.x[:, 2].max())
+    # the pack settled with mu 0.6 slumps a little at mu 0.15 before the lid reaches it
+    start, end = top + 0.5e-3, top - 0.5e-3
+    cfg, module = small({"scenario": "lid_compression", "initial_state": str(pack_dir / "state.npz"),
+                         "lid": {"start": start, "end": end, "speed": 0.05, "frames": 40},
+                         "output": {"vtk": False}})  # fmt: skip
+    summary = module.run(cfg, tmp_path)
+    phase, strain, force = read_force_strain_csv(tmp_path / "force_strain.csv")
+    with (tmp_path / "force_strain.csv").open() as fh:
+        assert next(csv.reader(fh)) == ["phase", "strain", "force"]
+    assert (tmp_path / "force_strain.png").stat().st_size > 10_000
+    assert phase[0] == "load" and phase[-1] == "unload"
+    assert strain[0] == 0 and force[0] == 0  # the lid starts above the pack
+    assert strain.max() == pytest.approx((start - end) / start, rel=1e-9)
+    # loading above unloading at the same strain (friction), over the range both carry force
+    load, unload = phase == "load", phase == "unload"
+    grid = np.linspace(strain[load & (force > 0)].min(), strain.max(), 12)[1:-1]
+    f_load = np.interp(grid, strain[load], force[load])
+    order = np.argsort(strain[unload])
+    f_unload = np.interp(grid, strain[unload][order], force[unload][order])
+    assert np.mean(f_load - f_unload) > 0
+    assert summary["hysteresis_energy"] > 0
+    assert summary["peak_force"] == pytest.approx(force.max())
+    assert 0 <= summary["residual_strain"] <= strain.max()
+
+
+def test_lid_above_the_pack_is_required(tmp_path, settled):
+    pack_dir, _ = settled
+    cfg, module = small({"scenario": "lid_compression", "initial_state": str(pack_dir / "state.npz"),
+                         "lid": {"start": 1e-3, "end": 0.5e-3}})  # fmt: skip
+    with pytest.raises(ConfigError, match="lid.start"):
+        module.run(cfg, tmp_path)
+
+
+def test_missing_state_file_is_named(tmp_path):
+    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(tmp_path / "nope.npz")})
+    with pytest.raises(ConfigError, match="no state file"):
+        module.run(cfg, tmp_path)
+
+
+@pytest.mark.parametrize("name", [n for n in EXAMPLES if n.startswith("paper-")])
+def test_paper_examples_are_valid_configs(name):
+    import tomllib
+
+    cfg, _ = checked_config(tomllib.loads(example_text(name)))
+    assert cfg["material"]["E"] == 90e9 and cfg["material"]["nu"] == 0.16 and cfg["material"]["density"] == 2200.0
+    if name.startswith("paper-collapse"):
+        expected = {"high": (0.9, 0.8), "mid": (0.6, 0.5), "low": (0.3, 0.2)}[name.rsplit("-", 1)[1]]
+        assert (cfg["contact"]["mu_s"], cfg["contact"]["mu_d"]) == expected
+    if name == "paper-compression":
+        assert (cfg["lid"]["start"], cfg["lid"]["end"]) == (7e-3, 4.9e-3)
+        assert cfg["contact"]["mu_s"] == cfg["contact"]["mu_d"] == 0.15
+
+
+def test_summary_is_json(settled):
+    out, summary = settled
+    assert json.loads((out / "summary.json").read_text())["n_grains"] == summary["n_grains"]
