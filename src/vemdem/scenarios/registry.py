@@ -18,6 +18,7 @@ SCENARIOS = {
 EXAMPLES = {
     "grain_compression": "grain_compression.toml",
     "drop": "drop.toml",
+    "pile": "pile.toml",
     "paper-pack": "paper-pack.toml",
     "paper-collapse-high": "paper-collapse-high.toml",
     "paper-collapse-mid": "paper-collapse-mid.toml",
