@@ -370,12 +370,7 @@ def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: st
     ax.set_xlabel(f"{distance_name} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     ax.set_title(f"{title}: angle of repose" if title else "angle of repose")
-    ax.set_aspect("equal")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    _save_side_view(fig, ax, path)
 
 
 def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, title: str = "", note: str = "") -> None:
@@ -394,6 +389,12 @@ def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, ti
     ax.set_title(title or "heap")
     if note:
         ax.text(0.02, 0.95, textwrap.fill(note, 70), transform=ax.transAxes, va="top", fontsize=8)
+    _save_side_view(fig, ax, path)
+
+
+def _save_side_view(fig, ax, path: Path) -> None:
+    from .plots import plt
+
     ax.set_aspect("equal")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")

@@ -145,6 +145,9 @@ def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume
         if not path.is_absolute() and base_dir is not None and not path.exists():
             path = Path(base_dir) / path  # relative to the config file when not to the working directory
     try:
-        return load_state(path), path
+        state = load_state(path)
     except StateFileError as exc:
         raise ConfigError(str(exc)) from None
+    if "box" not in state.meta:
+        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
+    return state, path

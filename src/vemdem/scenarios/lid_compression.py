@@ -70,8 +70,6 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = initial.meta
-    if "box" not in meta:
-        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
     lid, duration = lid_wall(cfg["lid"], meta["box"], meta["centre"])
     top = float(initial.x[:, 2].max()) - meta["floor"]
     if top >= cfg["lid"]["start"]:

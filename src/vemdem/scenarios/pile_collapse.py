@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.repose import angle_of_repose, plot_heap, plot_pile
-from ..config import REQUIRED, ConfigError, Field
+from ..config import REQUIRED, Field
 from ..io.results import write_json
 from ..io.state import save_state
 from .granular import at_rest, box_planes, common_tables, initial_state_from, kinetic_ratio, pack_stage_schema
@@ -68,8 +68,6 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = initial.meta
-    if "box" not in meta:
-        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
     # the four walls are gone from t = 0: only the floor remains
     floor = box_planes(tuple(meta["box"]), tuple(meta["centre"]), meta["floor"])[:1]
     scene = scene_from(initial.grains, cfg, floor)
