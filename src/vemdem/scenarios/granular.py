@@ -31,6 +31,8 @@ PAPER_MATERIAL = with_defaults(MATERIAL_SCHEMA, E=90e9, nu=0.16, density=2200.0)
 # grains' elastic periods (~1e-7 s) would otherwise set the step (docs/results.md, docs/dynamics.md).
 GRANULAR_SOLVER = with_defaults(SOLVER_SCHEMA, integrator="explicit", mass_scaling=1e6, dt_max=1e-4)
 
+SETTLING_DAMPING = 20.0  # 1/s, mass damping while a pack settles (pack.py says why)
+
 SETTLE_SCHEMA = {
     "kinetic_threshold": Field(
         float, 1e-3, positive, "at rest when the mean kinetic energy per grain is below this share of m g d"
@@ -110,6 +112,8 @@ def pack_stage_schema(pack_schema: dict) -> dict:
     table = {k: pack_schema[k] for k in keys}
     table["mu_s"] = Field(float, 0.6, lambda v: None if v >= 0 else "must be >= 0", "friction while settling")
     table["mu_d"] = Field(float, 0.5, lambda v: None if v >= 0 else "must be >= 0", "friction while settling")
+    table["mass_damping"] = Field(float, SETTLING_DAMPING, lambda v: None if v >= 0 else "must be >= 0",
+                                  "1/s, mass damping while settling")  # fmt: skip
     return table
 
 
@@ -120,10 +124,11 @@ def pack_config(cfg: dict) -> dict:
 
     table = dict(cfg["pack"])
     contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"))
+    solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
     settle = {k: field.default for k, field in PACK_SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
     return {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
-            "contact": contact, "solver": cfg["solver"], "settle": settle,
+            "contact": contact, "solver": solver, "settle": settle,
             "output": {"every": PACK_SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
 
 
