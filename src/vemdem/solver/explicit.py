@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..contact.law import normal_stiffness
 from ..contact.model import PenetrationError
@@ -147,8 +148,7 @@ class ExplicitIntegrator:
         G = scene.n_grains
         vptr = scene.elements.vertex_ptr
         v = state.v
-        c = scene.grain_centroids(v)
-        r = np.sqrt(np.maximum.reduceat(np.sum((v - np.repeat(c, np.diff(vptr), axis=0)) ** 2, axis=1), vptr[:-1]))
+        c, r = _grain_speeds(v, scene.mass.lumped, vptr)
         limit = np.inf
         # grain-grain and grain-mesh candidates: not yet active means at least gbar apart
         pairs = self._candidates["pairs"] if self._candidates is not None else np.zeros((0, 2), np.int64)
@@ -177,7 +177,7 @@ class ExplicitIntegrator:
             if not plane.motion.active(state.t):
                 continue
             n = plane.normal
-            dist = np.minimum.reduceat((state.x - plane.point_at(state.t)) @ n, vptr[:-1])
+            dist = _plane_distances(state.x, vptr, plane.point_at(state.t), n)
             speed = np.maximum(-(c @ n) + plane.motion.velocity(state.t) @ n, 0.0) + r
             limit = min(limit, _closing_time(dist, speed, gbar, f))
         return limit
@@ -219,6 +219,38 @@ class ExplicitIntegrator:
             cr,
         )
         return new, info
+
+
+@njit(cache=True)
+def _grain_speeds(v, mass, vptr):
+    """Mass-weighted centre velocity c of each grain and r, its vertices' largest speed about c."""
+    G = len(vptr) - 1
+    c = np.zeros((G, 3))
+    r = np.zeros(G)
+    for g in range(G):
+        m = 0.0
+        for i in range(vptr[g], vptr[g + 1]):
+            m += mass[i]
+            for a in range(3):
+                c[g, a] += mass[i] * v[i, a]
+        for a in range(3):
+            c[g, a] /= m
+        for i in range(vptr[g], vptr[g + 1]):
+            s = (v[i, 0] - c[g, 0]) ** 2 + (v[i, 1] - c[g, 1]) ** 2 + (v[i, 2] - c[g, 2]) ** 2
+            r[g] = max(r[g], np.sqrt(s))
+    return c, r
+
+
+@njit(cache=True)
+def _plane_distances(x, vptr, point, normal):
+    """Signed distance of each grain's lowest vertex over the plane (point, normal)."""
+    G = len(vptr) - 1
+    out = np.full(G, np.inf)
+    for g in range(G):
+        for i in range(vptr[g], vptr[g + 1]):
+            d = (x[i, 0] - point[0]) * normal[0] + (x[i, 1] - point[1]) * normal[1] + (x[i, 2] - point[2]) * normal[2]
+            out[g] = min(out[g], d)
+    return out
 
 
 def _closing_time(d, speed, gbar, f) -> float:
