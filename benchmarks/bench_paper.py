@@ -55,11 +55,7 @@ def run_one(name: str, out: Path, grains: int | None) -> dict:
     done = folder / "summary.json"
     if done.is_file():
         return json.loads(done.read_text())
-    resume = (folder / "checkpoint.npz").is_file()
-    t0 = time.perf_counter()
-    summary = module.run(cfg, folder, resume=resume)
-    summary.setdefault("wall_seconds", time.perf_counter() - t0)
-    return summary
+    return module.run(cfg, folder, resume=(folder / "checkpoint.npz").is_file())
 
 
 def row(name: str, s: dict) -> str:

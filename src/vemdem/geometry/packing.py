@@ -159,7 +159,12 @@ def pack_height(grains: Sequence[Polyhedron], floor: float = 0.0) -> float:
     if len(grains) == 0:
         raise ValueError("grains: need at least one grain")
     volumes = np.array([g.volume for g in grains])
-    heights = np.array([g.centroid[2] for g in grains]) - floor
+    return centre_of_volume_height(volumes, np.array([g.centroid[2] for g in grains]) - floor)
+
+
+def centre_of_volume_height(volumes: np.ndarray, heights: np.ndarray) -> float:
+    """Twice the volume-weighted mean height (`pack_height` from arrays: grain volumes and
+    centroid heights above the floor)."""
     return 2.0 * float(volumes @ heights) / float(volumes.sum())
 
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..config import ConfigError, Field, positive
 from ..contact.walls import Motion, PlaneWall
+from ..geometry.packing import centre_of_volume_height
 from ..io.state import StateFileError, load_state
 from ..scene import Scene
 from .grain_compression import MATERIAL_SCHEMA, VEM_SCHEMA
@@ -86,8 +87,7 @@ def pack_measures(scene: Scene, x: np.ndarray, box: tuple[float, float], floor: 
     geometry.packing.pack_height, which explains why); packing_fraction: grain volume over
     box x pack_height."""
     volume = scene.elements.volume
-    z = scene.grain_centroids(x)[:, 2] - floor
-    height = 2.0 * float(volume @ z) / float(volume.sum())
+    height = centre_of_volume_height(volume, scene.grain_centroids(x)[:, 2] - floor)
     return {"pack_height": height, "packing_fraction": float(volume.sum()) / (box[0] * box[1] * height)}
 
 

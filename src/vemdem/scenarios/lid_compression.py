@@ -41,7 +41,7 @@ SCHEMA = {
 SCHEMA["output"] = {"vtk": SCHEMA["output"]["vtk"]}  # frames come from lid.frames
 
 
-def lid_wall(lid: dict, box, centre) -> tuple[PlaneWall, float]:
+def lid_wall(lid: dict, centre) -> tuple[PlaneWall, float]:
     """The lid (normal down) and the duration of the cycle."""
     if lid["end"] >= lid["start"]:
         raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
@@ -70,7 +70,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = initial.meta
-    lid, duration = lid_wall(cfg["lid"], meta["box"], meta["centre"])
+    lid, duration = lid_wall(cfg["lid"], meta["centre"])
     top = float(initial.x[:, 2].max()) - meta["floor"]
     if top >= cfg["lid"]["start"]:
         raise ConfigError(f"lid.start: the pack reaches {top * 1e3:.3g} mm above the floor, above the lid's start "

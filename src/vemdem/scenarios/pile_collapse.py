@@ -21,7 +21,15 @@ from ..analysis.repose import angle_of_repose, plot_heap, plot_pile
 from ..config import REQUIRED, Field
 from ..io.results import write_json
 from ..io.state import save_state
-from .granular import at_rest, box_planes, common_tables, initial_state_from, kinetic_ratio, pack_stage_schema
+from .granular import (
+    at_rest,
+    box_planes,
+    common_tables,
+    initial_state_from,
+    kinetic_ratio,
+    pack_stage_schema,
+    with_defaults,
+)
 from .pack import SCHEMA as PACK_SCHEMA
 from .scene import config_fingerprint, run_summary, scene_from, simulate
 
@@ -31,9 +39,7 @@ SCHEMA = {
     "pack": pack_stage_schema(PACK_SCHEMA),
     **common_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }
-SCHEMA["settle"] = dict(SCHEMA["settle"])
-SCHEMA["settle"]["min_time"] = Field(float, 0.05, lambda v: None if v >= 0 else "must be >= 0",
-                                     "s before rest is checked (the pile must first start to move)")  # fmt: skip
+SCHEMA["settle"] = with_defaults(SCHEMA["settle"], min_time=0.05)  # the pile must first start to move
 
 
 def measure_pile(scene, x, meta: dict):
