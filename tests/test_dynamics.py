@@ -206,3 +206,27 @@ def test_explicit_takes_a_remainder_shorter_than_dt_min():
     state, stats = advance_explicit(integrator, state, t_end, StepControl(dt_min=1e-10))
     assert state.t == pytest.approx(t_end, rel=1e-12)
     assert stats.rejected == 0
+
+
+def test_explicit_approach_limit_uses_the_exact_gap_rate_in_the_layer():
+    """Two cubes face to face inside the activation layer (gap g = gbar / 4), closing at 2 v, one
+    spinning about the contact normal: the spin does not change the gap, so the step may close
+    f g at the rate 2 v. The bound used for pairs still outside the layer (centre speed plus
+    spin) would have halved it."""
+    a = cube(1e-3)
+    law, friction = default_contact_laws(1e-3, STIFF.E, STIFF.density, damping_ratio=0.0)
+    gbar = law.activation_gap
+    b = cube(1e-3).translated((1e-3 + 0.25 * gbar, 0.0, 0.0))
+    scene = Scene.build([a, b], STIFF, law, friction, gravity=(0.0, 0.0, 0.0))
+    v = 0.05
+    centre = a.vertices.mean(axis=0)
+    arm = a.vertices - centre
+    omega = 2 * v / np.max(np.hypot(arm[:, 1], arm[:, 2]))  # the fastest vertex spins at 2 v
+    spin = omega * np.column_stack([np.zeros(8), -arm[:, 2], arm[:, 1]])
+    v0 = np.vstack([spin + [v, 0, 0], np.tile([-v, 0, 0], (8, 1))])
+    integrator = ExplicitIntegrator(scene)
+    state = explicit_initial_state(scene, integrator, v0=v0)
+    _, ints, floats = scene.contact.pairs(state.x, state.t, integrator.candidates(state.x, state.t))
+    assert len(ints) > 0
+    f = integrator.params.approach_fraction
+    assert integrator.approach_limit(state, ints, floats) == pytest.approx(f * 0.25 * gbar / (2 * v), rel=1e-6)

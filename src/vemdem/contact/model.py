@@ -167,6 +167,11 @@ class ContactModel:
         v_all = np.vstack([v, self._wall_velocities(t)])
         return floats[:, GAP], gap_rates(x_all, v_all, ints, floats), self.masses_of_pairs(ints)
 
+    def rates(self, x, v, t, ints, floats) -> np.ndarray:
+        """d(gap)/dt of the pairs (ints, floats) found at x: the normal speed of their contact points."""
+        v_all = np.vstack([v, self._wall_velocities(t)])
+        return gap_rates(self.all_positions(x, t), v_all, ints, floats)
+
     def _plane_pairs(self, x_all, t, gbar):
         ints, floats = [np.zeros((0, INT_COLS), np.int64)], [np.zeros((0, FLOAT_COLS))]
         flags = np.zeros(self.n_vertices, np.bool_)

@@ -15,8 +15,8 @@ Stable step, recomputed every step (the safety factor covers the nonlinearity):
 - omega_contact^2 = max over active pairs of k(g) (1/m_A + 1/m_B), m_A, m_B the smallest vertex
   masses of the two sides (a wall has none), k(g) the current contact stiffness; the damping
   ratio zeta shortens the step of a damped oscillator by the factor in front of it;
-- approach: no step may close more than `approach_fraction` of the smallest gap (or of the
-  activation gap for pairs not yet active), at the current vertex speeds.
+- approach: no step may close more than `approach_fraction` of a pair's gap, at its exact gap rate
+  for pairs in the activation layer, at a bound on the speed for pairs not yet in it.
 A step whose end state is not admissible (a vertex behind a wall, an inverted element, a non-finite
 force) is redone with half the step, as in the implicit integrator.
 
@@ -137,33 +137,28 @@ class ExplicitIntegrator:
         return min(dt, self.approach_limit(state, ints, floats))
 
     def approach_limit(self, state: State, ints, floats) -> float:
-        """Longest step in which no pair closes more than `approach_fraction` f of its gap inside
-        the activation layer: dt <= (max(d - gbar, 0) + f min(d, gbar)) / s for a pair at distance
-        d (at least) approaching at speed s (at most). Pairs outside the Verlet list cannot meet
-        before the list is refreshed, so only candidate pairs and the planes count, each with the
-        relative speed of its two sides: a column in free fall is not slowed by its own speed.
-        Speeds: grain centre velocity c plus r, the largest vertex speed about it."""
+        """Longest step in which no pair closes more than `approach_fraction` f of its gap:
+        - pairs in the activation layer (ints, floats at state.x): dt <= f g / (-dg/dt), with the
+          exact gap rate of their contact points (the change of rate within a step, a dt^2 / 2,
+          is four orders below the gap at the steps taken);
+        - everything farther than gbar may enter the layer by at most f gbar: dt <= f gbar / s over
+          the Verlet-list pairs (pairs outside the list cannot meet before it is refreshed) and
+          (max(d - gbar, 0) + f gbar) / s over the planes, s a bound on the approach speed: the
+          relative centre speed plus r, each side's largest vertex speed about its centre.
+        The bound on s is loose for spinning grains, so using it for pairs already in the layer (as
+        before) took steps 3.5x shorter than the exact rate in a settling 515-grain pack."""
         scene, f = self.scene, self.params.approach_fraction
         gbar = scene.contact.law.activation_gap
         G = scene.n_grains
         vptr = scene.elements.vertex_ptr
-        v = state.v
-        c, r = _grain_speeds(v, scene.mass.lumped, vptr)
+        c, r = _grain_speeds(state.v, scene.mass.lumped, vptr)
         limit = np.inf
-        # grain-grain and grain-mesh candidates: not yet active means at least gbar apart
+        if len(ints):
+            rate = scene.contact.rates(state.x, state.v, state.t, ints, floats)
+            closing = rate < 0
+            if closing.any():
+                limit = f * float(np.min(floats[closing, GAP] / -rate[closing]))
         pairs = self._candidates["pairs"] if self._candidates is not None else np.zeros((0, 2), np.int64)
-        d = np.full(len(pairs), gbar)
-        if len(ints) and len(pairs):
-            width = G + len(scene.contact.meshes) + len(scene.contact.planes) + 1
-            key = pairs[:, 0] * width + pairs[:, 1]
-            active_key = ints[:, GRAIN_A] * width + ints[:, GRAIN_B]
-            active_key2 = ints[:, GRAIN_B] * width + ints[:, GRAIN_A]
-            order = np.argsort(key)
-            sorted_key = key[order]
-            for k in (active_key, active_key2):  # an active pair may list its grains either way round
-                pos = np.minimum(np.searchsorted(sorted_key, k), len(key) - 1)
-                hit = sorted_key[pos] == k
-                np.minimum.at(d, order[pos[hit]], floats[hit, GAP])
         if len(pairs):
             other = pairs[:, 1]
             wall = other >= G
@@ -171,15 +166,14 @@ class ExplicitIntegrator:
             c_other = np.where(wall[:, None], wall_v[np.maximum(other - G, 0)] if len(wall_v) else 0.0,
                                c[np.minimum(other, G - 1)])  # fmt: skip
             speed = np.linalg.norm(c[pairs[:, 0]] - c_other, axis=1) + r[pairs[:, 0]] + np.where(wall, 0.0, r[np.minimum(other, G - 1)])
-            limit = _closing_time(d, speed, gbar, f)
-        # planes: each grain's lowest vertex over the plane, approaching with its normal speed
+            limit = min(limit, _closing_time(np.full(len(pairs), gbar), speed, gbar, f))
         for plane in scene.contact.planes:
             if not plane.motion.active(state.t):
                 continue
             n = plane.normal
             dist = _plane_distances(state.x, vptr, plane.point_at(state.t), n)
             speed = np.maximum(-(c @ n) + plane.motion.velocity(state.t) @ n, 0.0) + r
-            limit = min(limit, _closing_time(dist, speed, gbar, f))
+            limit = min(limit, _closing_time(np.maximum(dist, gbar), speed, gbar, f))
         return limit
 
     def _mesh_velocities(self, t):
