@@ -4,6 +4,7 @@ against brute force (test 7)."""
 
 from collections import Counter
 
+import ipctk
 import numpy as np
 import pytest
 from numba import njit
@@ -11,8 +12,15 @@ from numba import njit
 from vemdem.contact.broad import brute_force_pairs, candidate_pairs
 from vemdem.contact.forces import evaluate_contacts
 from vemdem.contact.law import InterfaceLaw
-from vemdem.contact.narrow import PAIR_NAMES, edge_edge_closest, point_triangle_closest
-from vemdem.contact.pairs import find_contacts
+from vemdem.contact.narrow import (
+    EDGE_EDGE,
+    PAIR_NAMES,
+    VERTEX_EDGE,
+    VERTEX_FACE,
+    edge_edge_closest,
+    point_triangle_closest,
+)
+from vemdem.contact.pairs import GAP, NODE0, find_contacts
 from vemdem.contact.topology import CONCAVE, CONVEX, FLAT, build_topology
 from vemdem.geometry import cube, l_prism, rotation_matrix, sand_grain
 
@@ -107,6 +115,34 @@ def test_no_duplicate_pairs_on_random_grains(rng):
         keys = {tuple(r[:5]) for r in ints}
         assert len(keys) == len(ints)
         assert sum(counts.values()) >= 1
+
+
+def test_recorded_gaps_are_the_ipctk_distances_of_their_primitives(rng):
+    """Every pair found between random grains at a gap of 0.3 gbar carries the distance ipctk
+    computes for its primitives (point-triangle, edge-edge, point-edge, point-point), and the
+    closest one is the surfaces' distance."""
+    a = sand_grain(seed=2, size=1.0)
+    checked = 0
+    for seed in range(6):
+        b = sand_grain(seed=200 + seed, size=1.0).rotated(rotation_matrix(rng.normal(size=3)))
+        direction = rng.normal(size=3)
+        b = _place_at_gap(a, b, direction / np.linalg.norm(direction), 0.3 * GBAR)
+        _, ints, floats, _ = pairs_of([a, b])
+        x = np.vstack([a.vertices, b.vertices])
+        for rec, gap in zip(ints, floats[:, GAP]):
+            n = x[rec[NODE0 : NODE0 + 4].clip(0)]
+            if rec[0] == VERTEX_FACE:
+                d2 = ipctk.point_triangle_distance(n[0], n[1], n[2], n[3])
+            elif rec[0] == EDGE_EDGE:
+                d2 = ipctk.edge_edge_distance(n[0], n[1], n[2], n[3])
+            elif rec[0] == VERTEX_EDGE:
+                d2 = ipctk.point_edge_distance(n[0], n[1], n[2])
+            else:
+                d2 = ipctk.point_point_distance(n[0], n[1])
+            assert gap == pytest.approx(np.sqrt(d2), rel=1e-9)
+            checked += 1
+        assert floats[:, GAP].min() == pytest.approx(0.3 * GBAR, rel=1e-6)
+    assert checked >= 6
 
 
 @njit(cache=True)

@@ -27,9 +27,8 @@ from .narrow import (
     VERTEX_EDGE,
     VERTEX_FACE,
     VERTEX_VERTEX,
-    edge_edge_lcp,
-    vertex_edge_lcp,
-    vertex_face_lcp,
+    PARALLEL_SIN2,
+    RANGE_TOL,
 )
 from .topology import CONCAVE, FLAT
 
@@ -46,24 +45,42 @@ def _norm(v):
     return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
+# The three gap tests below are narrow.py's vertex_face_lcp, vertex_edge_lcp and edge_edge_lcp
+# (same formulas, same tolerances) written on scalars: the array versions allocate a 3-vector per
+# difference, and those allocations took most of the narrow phase (docs/contact.md, measured).
+@njit(cache=True)
+def _sub(x, i, j):
+    return x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+
+
 @njit(cache=True)
 def _vf_gap(x, p, f, faces, gbar):
-    """Gap of vertex p against face f if the pair is eligible, else -1."""
-    t0 = x[faces[f, 0]]
-    t1 = x[faces[f, 1]]
-    t2 = x[faces[f, 2]]
-    ok, u, v = vertex_face_lcp(x[p], t0, t1, t2)
-    if not ok:
+    """Gap of vertex p against face f if the pair is eligible, else -1 (with the coordinates u, v)."""
+    i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+    e1x, e1y, e1z = _sub(x, i1, i0)
+    e2x, e2y, e2z = _sub(x, i2, i0)
+    a11 = e1x * e1x + e1y * e1y + e1z * e1z
+    a12 = e1x * e2x + e1y * e2y + e1z * e2z
+    a22 = e2x * e2x + e2y * e2y + e2z * e2z
+    det = a11 * a22 - a12 * a12
+    if det <= 0.0:
+        return -1.0, 0.0, 0.0
+    rx, ry, rz = _sub(x, p, i0)
+    b1 = rx * e1x + ry * e1y + rz * e1z
+    b2 = rx * e2x + ry * e2y + rz * e2z
+    u = (b1 * a22 - b2 * a12) / det
+    v = (b2 * a11 - b1 * a12) / det
+    if not (u > RANGE_TOL and v > RANGE_TOL and u + v < 1.0 - RANGE_TOL):
         return -1.0, u, v
-    e1 = t1 - t0
-    e2 = t2 - t0
-    n = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
-    r = x[p] - t0
-    side = r[0] * n[0] + r[1] * n[1] + r[2] * n[2]
+    side = rx * (e1y * e2z - e1z * e2y) + ry * (e1z * e2x - e1x * e2z) + rz * (e1x * e2y - e1y * e2x)
     if side <= 0.0:
         return -1.0, u, v
-    g = x[p] - (1.0 - u - v) * t0 - u * t1 - v * t2
-    d = _norm(g)
+    w = 1.0 - u - v
+    d2 = 0.0
+    for a in range(3):
+        g = x[p, a] - w * x[i0, a] - u * x[i1, a] - v * x[i2, a]
+        d2 += g * g
+    d = np.sqrt(d2)
     if d > gbar:
         return -1.0, u, v
     return d, u, v
@@ -71,12 +88,20 @@ def _vf_gap(x, p, f, faces, gbar):
 
 @njit(cache=True)
 def _ve_gap(x, p, e, edges, gbar):
-    e0 = x[edges[e, 0]]
-    e1 = x[edges[e, 1]]
-    ok, t = vertex_edge_lcp(x[p], e0, e1)
-    if not ok:
+    i0, i1 = edges[e, 0], edges[e, 1]
+    dx, dy, dz = _sub(x, i1, i0)
+    dd = dx * dx + dy * dy + dz * dz
+    if dd <= 0.0:
+        return -1.0, 0.0
+    rx, ry, rz = _sub(x, p, i0)
+    t = (rx * dx + ry * dy + rz * dz) / dd
+    if not (RANGE_TOL < t < 1.0 - RANGE_TOL):
         return -1.0, t
-    d = _norm(x[p] - (1.0 - t) * e0 - t * e1)
+    d2 = 0.0
+    for a in range(3):
+        g = x[p, a] - (1.0 - t) * x[i0, a] - t * x[i1, a]
+        d2 += g * g
+    d = np.sqrt(d2)
     return (d if d <= gbar else -1.0), t
 
 
@@ -84,14 +109,27 @@ def _ve_gap(x, p, e, edges, gbar):
 def _ee_gap(x, ea, eb, edges, edge_type, gbar):
     if edge_type[ea] == FLAT or edge_type[eb] == FLAT:
         return -1.0, 0.0, 0.0
-    a0 = x[edges[ea, 0]]
-    a1 = x[edges[ea, 1]]
-    b0 = x[edges[eb, 0]]
-    b1 = x[edges[eb, 1]]
-    ok, s, t = edge_edge_lcp(a0, a1, b0, b1)
-    if not ok:
+    a0, a1, b0, b1 = edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]
+    dax, day, daz = _sub(x, a1, a0)
+    dbx, dby, dbz = _sub(x, b1, b0)
+    aa = dax * dax + day * day + daz * daz
+    bb = dbx * dbx + dby * dby + dbz * dbz
+    ab = dax * dbx + day * dby + daz * dbz
+    if aa * bb - ab * ab <= PARALLEL_SIN2 * aa * bb:
+        return -1.0, 0.0, 0.0
+    rx, ry, rz = _sub(x, a0, b0)
+    ra = rx * dax + ry * day + rz * daz
+    rb = rx * dbx + ry * dby + rz * dbz
+    det = aa * bb - ab * ab
+    s = (ab * rb - bb * ra) / det
+    t = (aa * rb - ab * ra) / det
+    if not (RANGE_TOL < s < 1.0 - RANGE_TOL and RANGE_TOL < t < 1.0 - RANGE_TOL):
         return -1.0, s, t
-    d = _norm((1.0 - s) * a0 + s * a1 - (1.0 - t) * b0 - t * b1)
+    d2 = 0.0
+    for a in range(3):
+        g = (1.0 - s) * x[a0, a] + s * x[a1, a] - (1.0 - t) * x[b0, a] - t * x[b1, a]
+        d2 += g * g
+    d = np.sqrt(d2)
     return (d if d <= gbar else -1.0), s, t
 
 
@@ -126,24 +164,19 @@ def _vertex_vertex_survives(x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_p
 
 
 @njit(cache=True)
-def _box(x, v0, v1):
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    for v in range(v0, v1):
-        for a in range(3):
-            lo[a] = min(lo[a], x[v, a])
-            hi[a] = max(hi[a], x[v, a])
-    return lo, hi
-
-
-@njit(cache=True)
-def _region(x, A, B, vptr, gbar):
-    """Part of grain A's box that lies within gbar of grain B's box."""
-    loA, hiA = _box(x, vptr[A], vptr[A + 1])
-    loB, hiB = _box(x, vptr[B], vptr[B + 1])
-    lo = np.maximum(loA, loB - gbar)
-    hi = np.minimum(hiA, hiB + gbar)
-    return lo, hi
+def _region(x, A, B, vptr, gbar, lo, hi):
+    """Fill [lo, hi] with the part of grain A's box that lies within gbar of grain B's box."""
+    for a in range(3):
+        loA = hiA = x[vptr[A], a]
+        for v in range(vptr[A] + 1, vptr[A + 1]):
+            loA = min(loA, x[v, a])
+            hiA = max(hiA, x[v, a])
+        loB = hiB = x[vptr[B], a]
+        for v in range(vptr[B] + 1, vptr[B + 1]):
+            loB = min(loB, x[v, a])
+            hiB = max(hiB, x[v, a])
+        lo[a] = max(loA, loB - gbar)
+        hi[a] = min(hiA, hiB + gbar)
 
 
 @njit(cache=True)
@@ -161,26 +194,25 @@ def _span_meets(x, nodes, m, lo, hi):
 
 
 @njit(cache=True)
-def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges):
-    vs = np.empty(vptr[A + 1] - vptr[A], dtype=np.int64)
-    fs = np.empty(fptr[A + 1] - fptr[A], dtype=np.int64)
-    es = np.empty(eptr[A + 1] - eptr[A], dtype=np.int64)
-    one = np.empty(1, dtype=np.int64)
+def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges, buf):
+    """Vertices, faces and edges of grain A whose boxes meet [lo, hi], as three views into buf
+    (one allocation per grain pair: allocations dominated this kernel, docs/contact.md)."""
     nv = nf = ne = 0
     for v in range(vptr[A], vptr[A + 1]):
-        one[0] = v
-        if _span_meets(x, one, 1, lo, hi):
-            vs[nv] = v
+        if lo[0] <= x[v, 0] <= hi[0] and lo[1] <= x[v, 1] <= hi[1] and lo[2] <= x[v, 2] <= hi[2]:
+            buf[nv] = v
             nv += 1
+    fs = buf[nv:]
     for f in range(fptr[A], fptr[A + 1]):
         if _span_meets(x, faces[f], 3, lo, hi):
             fs[nf] = f
             nf += 1
+    es = fs[nf:]
     for e in range(eptr[A], eptr[A + 1]):
         if _span_meets(x, edges[e], 2, lo, hi):
             es[ne] = e
             ne += 1
-    return vs[:nv], fs[:nf], es[:ne]
+    return buf[:nv], fs[:nf], es[:ne]
 
 
 @njit(cache=True)
@@ -229,10 +261,17 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
     n = 0
-    loA, hiA = _region(x, A, B, vptr, gbar)
-    loB, hiB = _region(x, B, A, vptr, gbar)
-    vA, fA, eA = _features_near(x, A, loA, hiA, vptr, fptr, eptr, faces, edges)
-    vB, fB, eB = _features_near(x, B, loB, hiB, vptr, fptr, eptr, faces, edges)
+    box = np.empty((4, 3))
+    _region(x, A, B, vptr, gbar, box[0], box[1])
+    _region(x, B, A, vptr, gbar, box[2], box[3])
+    for a in range(3):
+        if box[0, a] > box[1, a] or box[2, a] > box[3, a]:
+            return 0  # the boxes are more than gbar apart
+    sizeA = vptr[A + 1] - vptr[A] + fptr[A + 1] - fptr[A] + eptr[A + 1] - eptr[A]
+    sizeB = vptr[B + 1] - vptr[B] + fptr[B + 1] - fptr[B] + eptr[B + 1] - eptr[B]
+    buf = np.empty(sizeA + sizeB, dtype=np.int64)
+    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, faces, edges, buf[:sizeA])
+    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, faces, edges, buf[sizeA:])
     # vertex-face, both ways: the vertex's grain is side "A" of the record
     for side in range(2):
         verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)
