@@ -179,22 +179,51 @@ def _region(x, A, B, vptr, gbar, lo, hi):
         hi[a] = min(hiA, hiB + gbar)
 
 
+@njit(parallel=True, cache=True)
+def feature_boxes(x, nodes):
+    """Box (lo, hi) of every feature: row k spans x[nodes[k]] (faces: 3 nodes, edges: 2). Computed
+    once per search: the pre-tests below compare boxes instead of re-reading the nodes."""
+    out = np.empty((len(nodes), 6))
+    for k in prange(len(nodes)):
+        for a in range(3):
+            lo = hi = x[nodes[k, 0], a]
+            for j in range(1, nodes.shape[1]):
+                lo = min(lo, x[nodes[k, j], a])
+                hi = max(hi, x[nodes[k, j], a])
+            out[k, a] = lo
+            out[k, 3 + a] = hi
+    return out
+
+
 @njit(cache=True)
-def _span_meets(x, nodes, m, lo, hi):
-    """Does the box of the first m of `nodes` meet [lo, hi]? (scalar loops: no temporaries)"""
+def _box_meets(box, k, lo, hi):
+    """Does feature k's box meet [lo, hi]?"""
     for a in range(3):
-        mn = x[nodes[0], a]
-        mx = mn
-        for k in range(1, m):
-            mn = min(mn, x[nodes[k], a])
-            mx = max(mx, x[nodes[k], a])
-        if mx < lo[a] or mn > hi[a]:
+        if box[k, 3 + a] < lo[a] or box[k, a] > hi[a]:
             return False
     return True
 
 
 @njit(cache=True)
-def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges, buf):
+def _point_near_box(x, p, box, k, gbar):
+    """Is vertex p within gbar of feature k's box? (the pre-test before an exact gap)"""
+    for a in range(3):
+        if x[p, a] < box[k, a] - gbar or x[p, a] > box[k, 3 + a] + gbar:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _boxes_near(box, i, j, gbar):
+    """Do the boxes of features i and j come within gbar?"""
+    for a in range(3):
+        if box[i, 3 + a] + gbar < box[j, a] or box[j, 3 + a] + gbar < box[i, a]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _features_near(x, A, lo, hi, vptr, fptr, eptr, fbox, ebox, buf):
     """Vertices, faces and edges of grain A whose boxes meet [lo, hi], as three views into buf
     (one allocation per grain pair: allocations dominated this kernel, docs/contact.md)."""
     nv = nf = ne = 0
@@ -204,12 +233,12 @@ def _features_near(x, A, lo, hi, vptr, fptr, eptr, faces, edges, buf):
             nv += 1
     fs = buf[nv:]
     for f in range(fptr[A], fptr[A + 1]):
-        if _span_meets(x, faces[f], 3, lo, hi):
+        if _box_meets(fbox, f, lo, hi):
             fs[nf] = f
             nf += 1
     es = fs[nf:]
     for e in range(eptr[A], eptr[A + 1]):
-        if _span_meets(x, edges[e], 2, lo, hi):
+        if _box_meets(ebox, e, lo, hi):
             es[ne] = e
             ne += 1
     return buf[:nv], fs[:nf], es[:ne]
@@ -232,31 +261,8 @@ def _record(ints, floats, n, cap, kind, A, B, fa, fb, nodes, c0, c1, gap):
 
 
 @njit(cache=True)
-def _point_near_tri(x, p, a, b, c, gbar):
-    """Is vertex p within gbar of the box of the triangle (a, b, c)? A scalar pre-test: the exact
-    gap functions allocate small arrays, and most feature pairs of two touching grains fail here."""
-    for k in range(3):
-        lo = min(x[a, k], x[b, k], x[c, k]) - gbar
-        hi = max(x[a, k], x[b, k], x[c, k]) + gbar
-        if x[p, k] < lo or x[p, k] > hi:
-            return False
-    return True
-
-
-@njit(cache=True)
-def _segments_near(x, a0, a1, b0, b1, gbar):
-    """Do the boxes of segments (a0, a1) and (b0, b1) come within gbar? (pre-test, as above)"""
-    for k in range(3):
-        if max(x[a0, k], x[a1, k]) + gbar < min(x[b0, k], x[b1, k]):
-            return False
-        if max(x[b0, k], x[b1, k]) + gbar < min(x[a0, k], x[a1, k]):
-            return False
-    return True
-
-
-@njit(cache=True)
 def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-                        v_face_ptr, v_faces, v_edge_ptr, v_edges, ints, floats):  # fmt: skip
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox, ints, floats):  # fmt: skip
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
@@ -270,14 +276,14 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
     sizeA = vptr[A + 1] - vptr[A] + fptr[A + 1] - fptr[A] + eptr[A + 1] - eptr[A]
     sizeB = vptr[B + 1] - vptr[B] + fptr[B + 1] - fptr[B] + eptr[B + 1] - eptr[B]
     buf = np.empty(sizeA + sizeB, dtype=np.int64)
-    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, faces, edges, buf[:sizeA])
-    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, faces, edges, buf[sizeA:])
+    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, fbox, ebox, buf[:sizeA])
+    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, fbox, ebox, buf[sizeA:])
     # vertex-face, both ways: the vertex's grain is side "A" of the record
     for side in range(2):
         verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)
         for p in verts:
             for f in fcs:
-                if not _point_near_tri(x, p, faces[f, 0], faces[f, 1], faces[f, 2], gbar):
+                if not _point_near_box(x, p, fbox, f, gbar):
                     continue
                 d, u, v = _vf_gap(x, p, f, faces, gbar)
                 if d >= 0.0:
@@ -285,7 +291,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                     n = _record(ints, floats, n, cap, VERTEX_FACE, ga, gb, p, f, nodes, u, v, d)
     for ea in eA:
         for eb in eB:
-            if not _segments_near(x, edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1], gbar):
+            if not _boxes_near(ebox, ea, eb, gbar):
                 continue
             d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
             if d >= 0.0:
@@ -295,7 +301,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
         verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
         for p in verts:
             for e in eds:
-                if not _segments_near(x, p, p, edges[e, 0], edges[e, 1], gbar):
+                if not _point_near_box(x, p, ebox, e, gbar):
                     continue
                 d, t = _ve_gap(x, p, e, edges, gbar)
                 if d >= 0.0 and _vertex_edge_survives(
@@ -315,13 +321,18 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
 
 @njit(parallel=True, cache=True)
 def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-               v_face_ptr, v_faces, v_edge_ptr, v_edges, cap, ints, floats, counts):  # fmt: skip
-    for k in prange(len(grain_pairs)):
-        counts[k] = grain_pair_contacts(
-            x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
-            edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges,
-            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
-        )  # fmt: skip
+               v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
+    # strided, not blocked: the pairs come sorted by grid cell, and a block of the pile's bottom
+    # holds far more touching pairs than a block of the falling column (static schedule)
+    m = len(grain_pairs)
+    stride = min(m, 64)
+    for c in prange(stride):
+        for k in range(c, m, stride):
+            counts[k] = grain_pair_contacts(
+                x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
+                edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox,
+                ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
+            )  # fmt: skip
 
 
 def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
@@ -332,6 +343,8 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
     """
     grain_pairs = np.ascontiguousarray(grain_pairs, dtype=np.int64).reshape(-1, 2)
     x = np.ascontiguousarray(x, dtype=np.float64)
+    fbox = feature_boxes(x, topo.faces)
+    ebox = feature_boxes(x, topo.edges)
     while True:
         m = len(grain_pairs)
         ints = np.empty((m * capacity, INT_COLS), dtype=np.int64)
@@ -340,7 +353,7 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
         _all_pairs(
             x, grain_pairs, gbar, topo.grain_vertex_ptr, topo.grain_face_ptr, topo.grain_edge_ptr, topo.faces,
             topo.edges, topo.edge_faces, topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces,
-            topo.vertex_edge_ptr, topo.vertex_edges, capacity, ints, floats, counts,
+            topo.vertex_edge_ptr, topo.vertex_edges, fbox, ebox, capacity, ints, floats, counts,
         )  # fmt: skip
         if m == 0 or counts.max() <= capacity:
             break
