@@ -322,17 +322,12 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
 @njit(parallel=True, cache=True)
 def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
                v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
-    # strided, not blocked: the pairs come sorted by grid cell, and a block of the pile's bottom
-    # holds far more touching pairs than a block of the falling column (static schedule)
-    m = len(grain_pairs)
-    stride = min(m, 64)
-    for c in prange(stride):
-        for k in range(c, m, stride):
-            counts[k] = grain_pair_contacts(
-                x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
-                edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox,
-                ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
-            )  # fmt: skip
+    for k in prange(len(grain_pairs)):
+        counts[k] = grain_pair_contacts(
+            x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
+            edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox,
+            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
+        )  # fmt: skip
 
 
 def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
