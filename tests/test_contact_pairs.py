@@ -10,17 +10,19 @@ import pytest
 from numba import njit
 
 from vemdem.contact.broad import brute_force_pairs, candidate_pairs
-from vemdem.contact.forces import evaluate_contacts
+from vemdem.contact.forces import evaluate_contacts, pair_inverse_masses
 from vemdem.contact.law import InterfaceLaw
 from vemdem.contact.narrow import (
     EDGE_EDGE,
+    N_NODES,
     PAIR_NAMES,
     VERTEX_EDGE,
     VERTEX_FACE,
     edge_edge_closest,
+    pair_weights,
     point_triangle_closest,
 )
-from vemdem.contact.pairs import GAP, NODE0, find_contacts
+from vemdem.contact.pairs import C0, C1, GAP, NODE0, find_contacts
 from vemdem.contact.topology import CONCAVE, CONVEX, FLAT, build_topology
 from vemdem.geometry import cube, l_prism, rotation_matrix, sand_grain
 
@@ -233,3 +235,25 @@ def test_broad_phase_equals_brute_force(n_grains, rng):
     vptr = np.arange(n_grains + 1) * 12
     for gap in (0.0, 0.05, 0.5):
         np.testing.assert_array_equal(candidate_pairs(x, vptr, gap), brute_force_pairs(x, vptr, gap))
+
+
+def test_pair_inverse_mass_is_the_eigenvalue_of_the_pair_spring(rng):
+    """k sum_i w_i^2 / m_i (the explicit stable step's contact frequency) equals the largest
+    eigenvalue of M^-1/2 K M^-1/2 for the spring K = k (w (x) n)(w (x) n)^T of each pair."""
+    a = sand_grain(seed=3, size=1.0)
+    b = sand_grain(seed=4, size=1.0).rotated(rotation_matrix(rng.normal(size=3)))
+    direction = rng.normal(size=3)
+    b = _place_at_gap(a, b, direction / np.linalg.norm(direction), 0.3 * GBAR)
+    _, ints, floats, _ = pairs_of([a, b])
+    x = np.vstack([a.vertices, b.vertices])
+    mass = rng.uniform(0.5, 2.0, len(x))
+    w0, D = np.empty(6), np.empty((6, 2))
+    for rec, fl, inv_m in zip(ints, floats, pair_inverse_masses(1.0 / mass, ints, floats)):
+        w = pair_weights(rec[0], fl[C0], fl[C1], w0, D)[: N_NODES[rec[0]]]
+        nodes = rec[NODE0 : NODE0 + len(w)]
+        g = w @ x[nodes]
+        spring = np.zeros(3 * len(x))
+        for wi, node in zip(w, nodes):
+            spring[3 * node : 3 * node + 3] += wi * g / np.linalg.norm(g)
+        s = spring / np.sqrt(np.repeat(mass, 3))
+        assert np.linalg.eigvalsh(np.outer(s, s))[-1] == pytest.approx(inv_m, rel=1e-9)

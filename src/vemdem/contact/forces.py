@@ -123,6 +123,20 @@ def contact_points(x, ints, floats):
 
 
 @njit(cache=True)
+def pair_inverse_masses(inv_mass, ints, floats):
+    """sum_i w_i^2 / m_i of every pair: k times it is the one nonzero eigenvalue omega^2 of the
+    pair's spring k (w (x) n)(w (x) n)^T on the lumped masses (a wall node has 1/m = 0)."""
+    out = np.zeros(len(ints))
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    for c in range(len(ints)):
+        w = pair_weights(ints[c, KIND], floats[c, C0], floats[c, C1], w0, D)
+        for i in range(N_NODES[ints[c, KIND]]):
+            out[c] += w[i] * w[i] * inv_mass[ints[c, NODE0 + i]]
+    return out
+
+
+@njit(cache=True)
 def gap_rates(x, v, ints, floats):
     """d(gap)/dt of every pair: n . sum_i w_i v_i, n the unit gap vector sum_i w_i x_i / |.|
     (negative: the two sides approach)."""

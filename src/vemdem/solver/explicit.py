@@ -12,9 +12,10 @@ half-step velocity. The forces are the same kernels as the implicit integrator's
 Stable step, recomputed every step (the safety factor covers the nonlinearity):
     dt = safety * min(2/omega_grain, (sqrt(1 + zeta^2) - zeta) 2/omega_contact, approach limit)
 - omega_grain: the largest eigenvalue of each grain's (K, m) pair at rest, once per run;
-- omega_contact^2 = max over active pairs of k(g) (1/m_A + 1/m_B), m_A, m_B the smallest vertex
-  masses of the two sides (a wall has none), k(g) the current contact stiffness; the damping
-  ratio zeta shortens the step of a damped oscillator by the factor in front of it;
+- omega_contact^2 = max over active pairs of k(g) sum_i w_i^2 / m_i, the pair's weights w on its
+  nodes' lumped masses (a wall node has 1/m = 0), k(g) the current contact stiffness: the exact
+  eigenvalue of the pair's spring; the damping ratio zeta shortens the step of a damped
+  oscillator by the factor in front of it;
 - approach: no step may close more than `approach_fraction` of a pair's gap, at its exact gap rate
   for pairs in the activation layer, at a bound on the speed for pairs not yet in it.
 A step whose end state is not admissible (a vertex behind a wall, an inverted element, a non-finite
@@ -31,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..contact.forces import pair_inverse_masses
 from ..contact.law import normal_stiffness
 from ..contact.model import PenetrationError
-from ..contact.pairs import GAP, GRAIN_A, GRAIN_B
+from ..contact.pairs import GAP
 from ..scene import Scene
 from ..vem.element import InvertedElementError, evaluate
 from .newmark import (
@@ -81,8 +83,8 @@ class ExplicitIntegrator:
         self.grain_dt = float(grain_critical_steps(scene).min())
         self.inv_mass = 1.0 / scene.mass.lumped[:, None]
         self.f_grav = scene.mass.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
-        vptr = scene.elements.vertex_ptr
-        self.min_vertex_mass = np.minimum.reduceat(scene.mass.lumped, vptr[:-1])
+        n_wall_nodes = len(scene.contact.wall_nodes(0.0))
+        self.inv_mass_all = np.concatenate([1.0 / scene.mass.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
         zeta = scene.contact.friction.damping_ratio
         self.damping_factor = np.sqrt(1.0 + zeta * zeta) - zeta
         self.skin = params.skin_gaps * scene.contact.law.activation_gap
@@ -124,13 +126,9 @@ class ExplicitIntegrator:
 
     def stable_step(self, state: State, ints, floats) -> float:
         dt = self.grain_dt
-        G = self.scene.n_grains
         if len(ints):
             k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), self.scene.contact.law_params)
-            inv_m = 1.0 / self.min_vertex_mass[ints[:, GRAIN_A]]
-            gb = ints[:, GRAIN_B]
-            inv_m = inv_m + np.where(gb < G, 1.0 / self.min_vertex_mass[np.minimum(gb, G - 1)], 0.0)
-            omega = np.sqrt(np.max(k * inv_m))
+            omega = np.sqrt(np.max(k * pair_inverse_masses(self.inv_mass_all, ints, floats)))
             if omega > 0:
                 dt = min(dt, self.damping_factor * 2.0 / omega)
         dt *= self.params.safety
