@@ -67,13 +67,14 @@ def collapse(tmp_path, settled, mu_s, mu_d):
 
 
 def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
-    _, pack = settled
+    pack_dir, _ = settled
+    pack_top = float(load_state(pack_dir / "state.npz").x[:, 2].max())
     high_dir, high = collapse(tmp_path, settled, 0.9, 0.8)
     low_dir, low = collapse(tmp_path, settled, 0.3, 0.2)
     for out, s in ((high_dir, high), (low_dir, low)):
         assert (out / "pile.png").stat().st_size > 10_000
         assert s["runout"] > 0  # grains left the footprint of the removed walls
-        assert s["pile_height"] < pack["pack_height"] * 1.2
+        assert s["pile_height"] < pack_top  # the walls went: the heap is lower than the pack was
         final = load_state(out / "state.npz")
         assert final.x[:, 2].min() > 0
     # less friction: a flatter, wider heap (the paper's Figs. 3-5). Means over all grains: with 16
