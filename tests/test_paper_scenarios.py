@@ -78,16 +78,16 @@ def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
         final = load_state(out / "state.npz")
         assert final.x[:, 2].min() > 0
     # less friction: a flatter, wider heap (the paper's Figs. 3-5). Means over all grains: with 16
-    # grains the heap is about one layer, and its highest grain (pile_height) is one grain's chance
+    # grains the heap is about one layer, and its highest grain (pile_height) and its farthest one
+    # (runout) are one grain's chance (each flipped once after a change of the step control)
     shape = {}
     for name, out in (("high", high_dir), ("low", low_dir)):
         final = load_state(out / "state.npz")
         ptr = np.cumsum([0] + [g.n_vertices for g in final.grains])
         c = np.array([final.x[a:b].mean(axis=0) for a, b in zip(ptr[:-1], ptr[1:])])
         shape[name] = (c[:, 2].mean(), np.hypot(c[:, 0], c[:, 1]).mean())
-    assert shape["low"][0] < 0.95 * shape["high"][0]  # measured 13 % lower
-    assert shape["low"][1] > 1.05 * shape["high"][1]  # measured 13 % wider
-    assert low["runout"] > high["runout"]
+    assert shape["low"][0] < 0.95 * shape["high"][0]  # measured 13-22 % lower
+    assert shape["low"][1] > 1.05 * shape["high"][1]  # measured 13-15 % wider
 
 
 def test_lid_compression_cycle(tmp_path, settled):
