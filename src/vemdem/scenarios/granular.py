@@ -119,11 +119,12 @@ def pack_stage_schema(pack_schema: dict) -> dict:
 
 def pack_config(cfg: dict) -> dict:
     """A complete `pack` config from a pile_collapse / lid_compression config's [pack] table; the
-    pack settles with the same material, vem and solver settings, and its own friction."""
+    pack settles with the same material, vem and solver settings, its own friction and the
+    default normal damping (lid_compression's light damping is for the lid cycle)."""
     from .pack import SCHEMA as PACK_SCHEMA  # noqa: PLC0415 (pack imports this module)
 
     table = dict(cfg["pack"])
-    contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"))
+    contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None)
     solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
     settle = {k: field.default for k, field in PACK_SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
