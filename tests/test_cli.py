@@ -7,7 +7,6 @@ import tomllib
 
 import pytest
 
-from vemdem.cli import main
 from vemdem.scenarios.registry import EXAMPLES, example_text
 
 GOOD = """
@@ -34,14 +33,9 @@ def write(tmp_path, text):
     return path
 
 
-def run_cli(capsys, *args):
-    code = main([str(a) for a in args])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
-
-def test_run_writes_results(tmp_path, capsys):
-    code, out, _ = run_cli(capsys, "run", write(tmp_path, GOOD), "--out", tmp_path / "out", "--quiet")
+def test_run_writes_results(tmp_path, cli):
+    code, out, _ = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "out", "--quiet")
     assert code == 0
     summary = json.loads((tmp_path / "out/summary.json").read_text())
     assert summary["scenario"] == "grain_compression" and summary["n_steps"] == 3
@@ -64,8 +58,8 @@ def test_run_writes_results(tmp_path, capsys):
         (("[loading]", "[loading\n"), "job.toml", "not valid TOML"),
     ],
 )
-def test_bad_config_stops_before_running_with_exit_2(tmp_path, capsys, edit, key, problem):
-    code, out, err = run_cli(capsys, "run", write(tmp_path, GOOD.replace(*edit)), "--out", tmp_path / "out")
+def test_bad_config_stops_before_running_with_exit_2(tmp_path, cli, edit, key, problem):
+    code, out, err = cli("run", write(tmp_path, GOOD.replace(*edit)), "--out", tmp_path / "out")
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
@@ -73,20 +67,20 @@ def test_bad_config_stops_before_running_with_exit_2(tmp_path, capsys, edit, key
     assert not (tmp_path / "out").exists()
 
 
-def test_bad_grain_file_is_a_config_error(tmp_path, capsys):
+def test_bad_grain_file_is_a_config_error(tmp_path, cli):
     text = GOOD.replace('shape = "cube"', 'file = "nowhere.stl"')
-    code, _, err = run_cli(capsys, "run", write(tmp_path, text), "--out", tmp_path / "out")
+    code, _, err = cli("run", write(tmp_path, text), "--out", tmp_path / "out")
     assert code == 2 and "nowhere.stl" in err and "not found" in err
 
 
-def test_missing_config_file(tmp_path, capsys):
-    code, _, err = run_cli(capsys, "run", tmp_path / "none.toml", "--out", tmp_path / "out")
+def test_missing_config_file(tmp_path, cli):
+    code, _, err = cli("run", tmp_path / "none.toml", "--out", tmp_path / "out")
     assert code == 2 and "config file not found" in err
 
 
 @pytest.mark.parametrize("name", list(EXAMPLES))
-def test_examples_are_valid_configs(name, capsys):
-    code, out, _ = run_cli(capsys, "example", name)
+def test_examples_are_valid_configs(name, cli):
+    code, out, _ = cli("example", name)
     assert code == 0 and out == example_text(name)
     from vemdem.scenarios.registry import checked_config
 
@@ -94,10 +88,10 @@ def test_examples_are_valid_configs(name, capsys):
     assert cfg["scenario"]
 
 
-def test_example_lists_names_and_rejects_unknown(capsys):
-    code, out, _ = run_cli(capsys, "example")
+def test_example_lists_names_and_rejects_unknown(cli):
+    code, out, _ = cli("example")
     assert code == 0 and "grain_compression" in out.split()
-    code, _, err = run_cli(capsys, "example", "nope")
+    code, _, err = cli("example", "nope")
     assert code == 2 and "unknown example" in err
 
 
@@ -107,10 +101,10 @@ def test_console_script_is_installed(tmp_path):
     assert proc.returncode == 0 and "grain_compression" in proc.stdout
 
 
-def test_failed_run_exits_1_and_keeps_what_it_wrote(tmp_path, capsys):
+def test_failed_run_exits_1_and_keeps_what_it_wrote(tmp_path, cli):
     text = GOOD.replace("max_strain = 0.3", "max_strain = 0.95").replace("steps = 3", "steps = 2")
     text = text.replace("[loading]", "[solver]\nmax_iterations = 5\n[loading]")
-    code, _, err = run_cli(capsys, "run", write(tmp_path, text), "--out", tmp_path / "out", "--quiet")
+    code, _, err = cli("run", write(tmp_path, text), "--out", tmp_path / "out", "--quiet")
     assert code == 1
     assert "Newton did not converge" in err and str(tmp_path / "out") in err
     rows = (tmp_path / "out/force_strain.csv").read_text().splitlines()

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vemdem.cli import main
 from vemdem.config import ConfigError
 from vemdem.sweep import (
     case_grid,
@@ -49,11 +48,6 @@ def write_config(tmp_path) -> Path:
     path.write_text(CUBE)
     return path
 
-
-def run_cli(capsys, *args):
-    code = main([str(a) for a in args])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def read_table(path: Path) -> list[dict]:
@@ -160,10 +154,10 @@ def test_default_plot_y():
     assert default_plot_y("grain_compression", []) is None
 
 
-def test_sweep_runs_cases_on_a_local_cluster(tmp_path, capsys):
+def test_sweep_runs_cases_on_a_local_cluster(tmp_path, cli):
     out = tmp_path / "sweep"
-    code, stdout, err = run_cli(
-        capsys, "sweep", write_config(tmp_path), "--zip", "--workers", 2, "--out", out,
+    code, stdout, err = cli(
+        "sweep", write_config(tmp_path), "--zip", "--workers", 2, "--out", out,
         "--set", "material.E=1e6,2e6,2e6", "--set", "loading.max_strain=0.05,0.05,0.95",
     )  # fmt: skip
     assert code == 0, err
@@ -209,10 +203,10 @@ def scheduler():
         yield cluster.scheduler_address
 
 
-def test_all_cases_failed_exits_1(tmp_path, capsys, scheduler):
+def test_all_cases_failed_exits_1(tmp_path, cli, scheduler):
     out = tmp_path / "sweep"
-    code, _, err = run_cli(
-        capsys, "sweep", write_config(tmp_path), "--scheduler", scheduler, "--out", out, "--quiet",
+    code, _, err = cli(
+        "sweep", write_config(tmp_path), "--scheduler", scheduler, "--out", out, "--quiet",
         "--set", "loading.max_strain=0.9,0.95",
     )  # fmt: skip
     assert code == 1
@@ -230,9 +224,9 @@ def test_all_cases_failed_exits_1(tmp_path, capsys, scheduler):
         ("material.E", "expected KEY=V1,V2,..."),
     ],
 )
-def test_bad_set_exits_2_before_running(tmp_path, capsys, setting, problem):
+def test_bad_set_exits_2_before_running(tmp_path, cli, setting, problem):
     out = tmp_path / "sweep"
-    code, _, err = run_cli(capsys, "sweep", write_config(tmp_path), "--set", setting, "--out", out)
+    code, _, err = cli("sweep", write_config(tmp_path), "--set", setting, "--out", out)
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and problem in lines[0], err
