@@ -33,7 +33,6 @@ def write(tmp_path, text):
     return path
 
 
-
 def test_run_writes_results(tmp_path, cli):
     code, out, _ = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "out", "--quiet")
     assert code == 0

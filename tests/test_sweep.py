@@ -49,7 +49,6 @@ def write_config(tmp_path) -> Path:
     return path
 
 
-
 def read_table(path: Path) -> list[dict]:
     with path.open(newline="") as fh:
         return list(csv.DictReader(fh))
