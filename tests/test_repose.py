@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from vemdem.analysis.repose import angle_of_repose, plot_pile
+from vemdem.analysis.repose import angle_of_repose, plot_pile, vertical_exaggeration
 
 D = 1.45e-3  # grain size (m)
 CENTRE = (4e-3, 4e-3)  # the box centre
@@ -134,3 +134,11 @@ def test_plot_is_written(tmp_path):
     path = tmp_path / "pile.png"
     plot_pile(result, centroids, path, title="synthetic cone, 30°")
     assert path.stat().st_size > 1000
+
+
+def test_side_view_scale_keeps_flat_heaps_readable():
+    """True scale while the view is at most 3 times wider than high; beyond that the height is
+    drawn larger by a whole factor that brings the box back to about 3:1."""
+    assert vertical_exaggeration(30.0, 10.0) == 1
+    assert vertical_exaggeration(66.0, 4.4) == 5
+    assert vertical_exaggeration(10.0, 0.0) == 1

@@ -392,12 +392,26 @@ def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, ti
     _save_side_view(fig, ax, path)
 
 
+def vertical_exaggeration(width: float, height: float, target: float = 3.0) -> int:
+    """Whole-number vertical scale that shows a heap `width` wide and `height` high in a box about
+    `target` times wider than high (1 when it already is): a collapse's deposit can be 15 times
+    wider than high, a thin strip at true scale."""
+    if height <= 0 or width <= target * height:
+        return 1
+    return max(1, round(width / (target * height)))
+
+
 def _save_side_view(fig, ax, path: Path) -> None:
     from .plots import plt
 
-    ax.set_aspect("equal")
+    ax.relim()
+    (x0, y0), (x1, y1) = ax.dataLim.get_points()
+    k = vertical_exaggeration(x1 - min(x0, 0.0), y1 - min(y0, 0.0))
+    ax.set_aspect(k)  # one mm of height drawn k times as long as one of distance
+    if k > 1:
+        ax.set_ylabel(f"{ax.get_ylabel()}, vertical scale x{k}")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=2, frameon=False)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
