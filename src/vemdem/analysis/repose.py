@@ -386,9 +386,8 @@ def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, ti
     ax.scatter(distance * mm, centroids[:, 2] * mm, s=10, c="0.4", label="grain centroids")
     ax.set_xlabel("distance from the axis (mm)")
     ax.set_ylabel("height above the floor (mm)")
-    ax.set_title(title or "heap")
-    if note:
-        ax.text(0.02, 0.95, textwrap.fill(note, 70), transform=ax.transAxes, va="top", fontsize=8)
+    # the note goes under the title: inside the axes it covered a flat heap's thin plot
+    ax.set_title((title or "heap") + ("\n" + textwrap.fill(note, 90) if note else ""), fontsize=9 if note else None)
     _save_side_view(fig, ax, path)
 
 
