@@ -30,6 +30,7 @@ from .narrow import (
     PARALLEL_SIN2,
     RANGE_TOL,
 )
+from .broad import grain_boxes
 from .topology import CONCAVE, FLAT
 
 # columns of the integer contact record
@@ -38,11 +39,6 @@ INT_COLS = NODE0 + 6
 # columns of the float contact record
 C0, C1, GAP = 0, 1, 2
 FLOAT_COLS = 3
-
-
-@njit(cache=True)
-def _norm(v):
-    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 # The three gap tests below are narrow.py's vertex_face_lcp, vertex_edge_lcp and edge_edge_lcp
@@ -164,25 +160,17 @@ def _vertex_vertex_survives(x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_p
 
 
 @njit(cache=True)
-def _region(x, A, B, vptr, gbar, lo, hi):
+def _region(glo, ghi, A, B, gbar, lo, hi):
     """Fill [lo, hi] with the part of grain A's box that lies within gbar of grain B's box."""
     for a in range(3):
-        loA = hiA = x[vptr[A], a]
-        for v in range(vptr[A] + 1, vptr[A + 1]):
-            loA = min(loA, x[v, a])
-            hiA = max(hiA, x[v, a])
-        loB = hiB = x[vptr[B], a]
-        for v in range(vptr[B] + 1, vptr[B + 1]):
-            loB = min(loB, x[v, a])
-            hiB = max(hiB, x[v, a])
-        lo[a] = max(loA, loB - gbar)
-        hi[a] = min(hiA, hiB + gbar)
+        lo[a] = max(glo[A, a], glo[B, a] - gbar)
+        hi[a] = min(ghi[A, a], ghi[B, a] + gbar)
 
 
 @njit(parallel=True, cache=True)
 def feature_boxes(x, nodes):
     """Box (lo, hi) of every feature: row k spans x[nodes[k]] (faces: 3 nodes, edges: 2). Computed
-    once per search: the pre-tests below compare boxes instead of re-reading the nodes."""
+    once per search, as the grains' boxes: the pre-tests compare boxes instead of re-reading nodes."""
     out = np.empty((len(nodes), 6))
     for k in prange(len(nodes)):
         for a in range(3):
@@ -262,14 +250,14 @@ def _record(ints, floats, n, cap, kind, A, B, fa, fb, nodes, c0, c1, gap):
 
 @njit(cache=True)
 def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-                        v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox, ints, floats):  # fmt: skip
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats):  # fmt: skip
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
     n = 0
     box = np.empty((4, 3))
-    _region(x, A, B, vptr, gbar, box[0], box[1])
-    _region(x, B, A, vptr, gbar, box[2], box[3])
+    _region(glo, ghi, A, B, gbar, box[0], box[1])
+    _region(glo, ghi, B, A, gbar, box[2], box[3])
     for a in range(3):
         if box[0, a] > box[1, a] or box[2, a] > box[3, a]:
             return 0  # the boxes are more than gbar apart
@@ -321,11 +309,11 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
 
 @njit(parallel=True, cache=True)
 def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-               v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
+               v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
     for k in prange(len(grain_pairs)):
         counts[k] = grain_pair_contacts(
             x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
-            edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, fbox, ebox,
+            edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox,
             ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
         )  # fmt: skip
 
@@ -338,6 +326,7 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
     """
     grain_pairs = np.ascontiguousarray(grain_pairs, dtype=np.int64).reshape(-1, 2)
     x = np.ascontiguousarray(x, dtype=np.float64)
+    glo, ghi = grain_boxes(x, topo.grain_vertex_ptr, 0.0)
     fbox = feature_boxes(x, topo.faces)
     ebox = feature_boxes(x, topo.edges)
     while True:
@@ -348,7 +337,7 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
         _all_pairs(
             x, grain_pairs, gbar, topo.grain_vertex_ptr, topo.grain_face_ptr, topo.grain_edge_ptr, topo.faces,
             topo.edges, topo.edge_faces, topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces,
-            topo.vertex_edge_ptr, topo.vertex_edges, fbox, ebox, capacity, ints, floats, counts,
+            topo.vertex_edge_ptr, topo.vertex_edges, glo, ghi, fbox, ebox, capacity, ints, floats, counts,
         )  # fmt: skip
         if m == 0 or counts.max() <= capacity:
             break
