@@ -42,7 +42,7 @@ SCHEMA["output"] = {"vtk": SCHEMA["output"]["vtk"]}  # frames come from lid.fram
 # A light normal damping: with the scenes' 0.5 the viscous force of the lid's stiff contacts
 # (2 zeta sqrt(k m), m mass-scaled) rivalled the elastic one at the lid's speed, and the force
 # fell from 15 kN to 0.4 kN and back when the lid turned; with 0.05 the curve is continuous there
-# (the 515-grain paper run, docs/results.md)
+# (the paper-compression run, docs/results.md)
 SCHEMA["contact"] = with_defaults(SCHEMA["contact"], damping_ratio=0.05)
 
 

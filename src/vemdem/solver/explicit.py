@@ -145,8 +145,8 @@ class ExplicitIntegrator:
           Verlet-list pairs (pairs outside the list cannot meet before it is refreshed) and
           (max(d - gbar, 0) + e gbar) / s over the planes, s a bound on the approach speed: the
           relative centre speed plus r, each side's largest vertex speed about its centre.
-        The bound on s is loose for spinning grains, so using it for pairs already in the layer (as
-        before) took steps 3.5x shorter than the exact rate in a settling 515-grain pack."""
+        The bound on s is loose for spinning grains: used for pairs already in the layer (as
+        before), it allowed 1.1e-6 s where the exact rates allow 4.8e-6 s (settling 515-grain pack)."""
         scene, f, e = self.scene, self.params.approach_fraction, self.params.entry_fraction
         gbar = scene.contact.law.activation_gap
         G = scene.n_grains
@@ -166,7 +166,8 @@ class ExplicitIntegrator:
             c_other = np.where(wall[:, None], wall_v[np.maximum(other - G, 0)] if len(wall_v) else 0.0,
                                c[np.minimum(other, G - 1)])  # fmt: skip
             speed = np.linalg.norm(c[pairs[:, 0]] - c_other, axis=1) + r[pairs[:, 0]] + np.where(wall, 0.0, r[np.minimum(other, G - 1)])
-            limit = min(limit, _closing_time(np.full(len(pairs), gbar), speed, gbar, e))
+            if speed.max() > 0:  # all at least gbar apart: the fastest enters first
+                limit = min(limit, e * gbar / float(speed.max()))
         for plane in scene.contact.planes:
             if not plane.motion.active(state.t):
                 continue
