@@ -26,6 +26,10 @@ slope of the flank; the measurement keeps only what describes the flank:
    clip the surface roughness one-sidedly at both ends of the band (rough points above the
    band near the crest, below it near the toe), which flattens the line: 2 to 4.5 degrees
    too low on the test heaps; selecting on distance leaves the roughness symmetric.
+   A low mound (under 3 grain sizes) has a band less than `MIN_BAND` (one grain size) tall,
+   narrower than its surface roughness: the toe then comes down until the band is one grain
+   size tall, but never below the measured top of the floor layer (95th percentile of the
+   tops of the grains touching the floor). Such a mound reads 1 to 3.5 degrees low.
 4. **Fit**: ordinary least squares h = h0 - tan(theta) r with the standard error of the
    slope. The angle is atan of the slope, in degrees.
 5. **Uncertainty**: the same line fitted to each of `n_sectors` (8) azimuthal sectors with
@@ -61,6 +65,9 @@ Plan = Literal["round", "square", "auto"]
 MIN_FIT_POINTS = 3
 CELL_FOOTPRINTS = 2.0  # surface cell area in grain_size^2
 MAX_REFITS = 10
+MIN_BAND = 1.0  # flank band height in grain sizes below which the toe comes down (step 3)
+FLOOR_CONTACT = 0.1  # a grain whose lowest point is this close to the floor (grain sizes) lies on it
+LAYER_PERCENTILE = 95.0
 
 # Perimeter of the level set at unit distance: the area of a ring is this times its mid-radius.
 _LEVEL_SET_PERIMETER = {"round": 2 * math.pi, "square": 8.0}
@@ -118,17 +125,44 @@ def grain_tops(
     """Highest point of each grain: its highest vertex, or centroid + d/2 without vertices."""
     if vertices is None:
         return centroids[:, 2] + 0.5 * grain_size
+    return _per_grain_extreme(len(centroids), vertices, vertex_grain, np.maximum)
+
+
+def grain_bottoms(
+    centroids: np.ndarray,
+    grain_size: float,
+    vertices: np.ndarray | None = None,
+    vertex_grain: np.ndarray | None = None,
+) -> np.ndarray:
+    """Lowest point of each grain: its lowest vertex, or centroid - d/2 without vertices."""
+    if vertices is None:
+        return centroids[:, 2] - 0.5 * grain_size
+    return _per_grain_extreme(len(centroids), vertices, vertex_grain, np.minimum)
+
+
+def _per_grain_extreme(n_grains: int, vertices, vertex_grain, ufunc) -> np.ndarray:
     vertices = np.asarray(vertices, dtype=float)
     vertex_grain = np.asarray(vertex_grain)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or vertex_grain.shape != vertices.shape[:1]:
         raise ValueError("vertices must be (N, 3) with one owner grain id each in vertex_grain (N,)")
-    if vertex_grain.min() < 0 or vertex_grain.max() >= len(centroids):
-        raise ValueError(f"vertex_grain ids must lie in [0, {len(centroids)})")
-    tops = np.full(len(centroids), -np.inf)
-    np.maximum.at(tops, vertex_grain, vertices[:, 2])
-    if not np.isfinite(tops).all():
-        raise ValueError(f"{int((~np.isfinite(tops)).sum())} grains have no vertex in vertex_grain")
-    return tops
+    if vertex_grain.min() < 0 or vertex_grain.max() >= n_grains:
+        raise ValueError(f"vertex_grain ids must lie in [0, {n_grains})")
+    start = -np.inf if ufunc is np.maximum else np.inf
+    extreme = np.full(n_grains, start)
+    ufunc.at(extreme, vertex_grain, vertices[:, 2])
+    if not np.isfinite(extreme).all():
+        raise ValueError(f"{int((~np.isfinite(extreme)).sum())} grains have no vertex in vertex_grain")
+    return extreme
+
+
+def floor_layer_top(bottoms: np.ndarray, tops: np.ndarray, grain_size: float, floor: float) -> float:
+    """Height above the floor of the top of the one-grain layer lying on it: the 95th percentile
+    of the tops of the grains whose lowest point touches the floor (within FLOOR_CONTACT grain
+    sizes). A percentile, not the maximum: one grain standing on its narrow end would set that."""
+    on_floor = bottoms - floor <= FLOOR_CONTACT * grain_size
+    if not on_floor.any():
+        return grain_size  # a grain of size d lying on the floor
+    return float(np.percentile(tops[on_floor] - floor, LAYER_PERCENTILE))
 
 
 def plan_distance(xy: np.ndarray, centre: tuple[float, float], plan: str) -> np.ndarray:
@@ -199,16 +233,27 @@ def _flank_fit(r: np.ndarray, h: np.ndarray, low: float, high: float, grain_size
     return line
 
 
-def _flank(r: np.ndarray, h: np.ndarray, grain_size: float, toe: float, crest: float) -> tuple[np.ndarray, _Line]:
-    """The flank points (module docstring, step 3) and the line fitted to them."""
-    h_top = float(h.max())
-    low, high = toe * grain_size, h_top - crest * grain_size
-    if high < low:
+def _band(h_top: float, grain_size: float, toe: float, crest: float, layer_top: float) -> tuple[float, float]:
+    """Heights (above the floor) between which the flank is fitted (module docstring, step 3)."""
+    high = h_top - crest * grain_size
+    # On a low mound a band narrower than the surface roughness holds too few points to fit a
+    # slope, so the toe comes down until the band is MIN_BAND tall; never below the measured top
+    # of the floor layer, so that the single layer running out beyond the heap stays out.
+    low = max(min(toe * grain_size, high - MIN_BAND * grain_size), layer_top)
+    if high <= low:
         raise ValueError(
             f"pile is flat: its highest grain top is {h_top / grain_size:.2f} grain "
-            f"sizes above the floor, leaving no flank between the toe ({toe} grain "
-            f"sizes) and {crest} grain sizes below the top"
+            f"sizes above the floor, leaving no flank between the top of the floor layer "
+            f"({layer_top / grain_size:.2f} grain sizes) and {crest} grain sizes below the top"
         )
+    return low, high
+
+
+def _flank(
+    r: np.ndarray, h: np.ndarray, grain_size: float, toe: float, crest: float, layer_top: float
+) -> tuple[np.ndarray, _Line]:
+    """The flank points (module docstring, step 3) and the line fitted to them."""
+    low, high = _band(float(h.max()), grain_size, toe, crest, layer_top)
     used = (h >= low) & (h <= high)
     line = _flank_fit(r[used], h[used], low, high, grain_size)
     for _ in range(MAX_REFITS):
@@ -239,6 +284,7 @@ def _standard_error(values: np.ndarray) -> float:
 def _measure(
     centroids: np.ndarray,
     tops: np.ndarray,
+    layer_top: float,
     grain_size: float,
     floor: float,
     centre: tuple[float, float],
@@ -253,7 +299,7 @@ def _measure(
     azimuth = np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0])
     chosen = surface_grains(distance, azimuth, tops, grain_size, plan)
     r, h = distance[chosen], tops[chosen] - floor
-    used, line = _flank(r, h, grain_size, toe, crest)
+    used, line = _flank(r, h, grain_size, toe, crest, layer_top)
     sector = np.floor(_turns(azimuth[chosen]) * n_sectors).astype(np.int64)
     sector_angles = _sector_angles(r[used], h[used], sector[used], n_sectors)
     sector_se = _standard_error(sector_angles)
@@ -306,9 +352,11 @@ def angle_of_repose(
     if plan not in ("round", "square", "auto"):
         raise ValueError(f"plan must be 'round', 'square' or 'auto', got {plan!r}")
     tops = grain_tops(centroids, grain_size, vertices, vertex_grain)
+    bottoms = grain_bottoms(centroids, grain_size, vertices, vertex_grain)
+    layer_top = floor_layer_top(bottoms, tops, grain_size, floor)
     cx, cy = centroids[:, :2].mean(axis=0) if centre is None else centre
     centre = (float(cx), float(cy))
-    args = (centroids, tops, grain_size, floor, centre)
+    args = (centroids, tops, layer_top, grain_size, floor, centre)
     options = (n_sectors, toe, crest)
     if plan != "auto":
         return _measure(*args, plan, *options)[0]
