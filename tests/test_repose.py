@@ -97,6 +97,16 @@ def test_flat_layer_is_refused():
         angle_of_repose(layer, D)
 
 
+def test_grains_lying_on_a_layer_are_flat():
+    """A layer with a few grains resting on it (tops 1.7 D): 0.2 D between the layer's top and
+    0.5 D below the highest top is no flank to fit."""
+    centroids, _ = synthetic_heap(30.0, 0)
+    on_floor = centroids[np.isclose(centroids[:, 2], D / 2)]
+    resting = on_floor[:5] + [0.0, 0.0, 0.7 * D]
+    with pytest.raises(ValueError, match="less than 0.25 grain sizes of flank"):
+        angle_of_repose(np.vstack([on_floor, resting]), D)
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("shape", ["cone", "square"])
 def test_low_mound_is_measured_above_the_floor_layer(shape, seed):

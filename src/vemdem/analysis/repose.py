@@ -66,6 +66,7 @@ MIN_FIT_POINTS = 3
 CELL_FOOTPRINTS = 2.0  # surface cell area in grain_size^2
 MAX_REFITS = 10
 MIN_BAND = 1.0  # flank band height in grain sizes below which the toe comes down (step 3)
+MIN_FLANK = 0.25  # grain sizes: a heap with a lower band than this is flat (a grain on a layer)
 FLOOR_CONTACT = 0.1  # a grain whose lowest point is this close to the floor (grain sizes) lies on it
 LAYER_PERCENTILE = 95.0
 
@@ -116,43 +117,29 @@ class _Line:
         return (height - self.intercept) / self.slope
 
 
-def grain_tops(
+def grain_heights(
     centroids: np.ndarray,
     grain_size: float,
     vertices: np.ndarray | None = None,
     vertex_grain: np.ndarray | None = None,
-) -> np.ndarray:
-    """Highest point of each grain: its highest vertex, or centroid + d/2 without vertices."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest point of each grain: its lowest and highest vertex, or centroid -+ d/2
+    without vertices."""
     if vertices is None:
-        return centroids[:, 2] + 0.5 * grain_size
-    return _per_grain_extreme(len(centroids), vertices, vertex_grain, np.maximum)
-
-
-def grain_bottoms(
-    centroids: np.ndarray,
-    grain_size: float,
-    vertices: np.ndarray | None = None,
-    vertex_grain: np.ndarray | None = None,
-) -> np.ndarray:
-    """Lowest point of each grain: its lowest vertex, or centroid - d/2 without vertices."""
-    if vertices is None:
-        return centroids[:, 2] - 0.5 * grain_size
-    return _per_grain_extreme(len(centroids), vertices, vertex_grain, np.minimum)
-
-
-def _per_grain_extreme(n_grains: int, vertices, vertex_grain, ufunc) -> np.ndarray:
+        return centroids[:, 2] - 0.5 * grain_size, centroids[:, 2] + 0.5 * grain_size
     vertices = np.asarray(vertices, dtype=float)
     vertex_grain = np.asarray(vertex_grain)
+    n_grains = len(centroids)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or vertex_grain.shape != vertices.shape[:1]:
         raise ValueError("vertices must be (N, 3) with one owner grain id each in vertex_grain (N,)")
     if vertex_grain.min() < 0 or vertex_grain.max() >= n_grains:
         raise ValueError(f"vertex_grain ids must lie in [0, {n_grains})")
-    start = -np.inf if ufunc is np.maximum else np.inf
-    extreme = np.full(n_grains, start)
-    ufunc.at(extreme, vertex_grain, vertices[:, 2])
-    if not np.isfinite(extreme).all():
-        raise ValueError(f"{int((~np.isfinite(extreme)).sum())} grains have no vertex in vertex_grain")
-    return extreme
+    bottoms, tops = np.full(n_grains, np.inf), np.full(n_grains, -np.inf)
+    np.minimum.at(bottoms, vertex_grain, vertices[:, 2])
+    np.maximum.at(tops, vertex_grain, vertices[:, 2])
+    if not np.isfinite(tops).all():
+        raise ValueError(f"{int((~np.isfinite(tops)).sum())} grains have no vertex in vertex_grain")
+    return bottoms, tops
 
 
 def floor_layer_top(bottoms: np.ndarray, tops: np.ndarray, grain_size: float, floor: float) -> float:
@@ -240,11 +227,12 @@ def _band(h_top: float, grain_size: float, toe: float, crest: float, layer_top: 
     # slope, so the toe comes down until the band is MIN_BAND tall; never below the measured top
     # of the floor layer, so that the single layer running out beyond the heap stays out.
     low = max(min(toe * grain_size, high - MIN_BAND * grain_size), layer_top)
-    if high <= low:
+    if high - low < MIN_FLANK * grain_size:
         raise ValueError(
             f"pile is flat: its highest grain top is {h_top / grain_size:.2f} grain "
-            f"sizes above the floor, leaving no flank between the top of the floor layer "
-            f"({layer_top / grain_size:.2f} grain sizes) and {crest} grain sizes below the top"
+            f"sizes above the floor, leaving less than {MIN_FLANK} grain sizes of flank between "
+            f"the top of the floor layer ({layer_top / grain_size:.2f} grain sizes) and {crest} "
+            f"grain sizes below the top"
         )
     return low, high
 
@@ -351,8 +339,7 @@ def angle_of_repose(
         raise ValueError(f"grain_size must be > 0, got {grain_size}")
     if plan not in ("round", "square", "auto"):
         raise ValueError(f"plan must be 'round', 'square' or 'auto', got {plan!r}")
-    tops = grain_tops(centroids, grain_size, vertices, vertex_grain)
-    bottoms = grain_bottoms(centroids, grain_size, vertices, vertex_grain)
+    bottoms, tops = grain_heights(centroids, grain_size, vertices, vertex_grain)
     layer_top = floor_layer_top(bottoms, tops, grain_size, floor)
     cx, cy = centroids[:, :2].mean(axis=0) if centre is None else centre
     centre = (float(cx), float(cy))
