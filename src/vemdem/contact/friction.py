@@ -164,39 +164,66 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     return stick, store
 
 
+@njit(cache=True)
+def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, stick_out,
+                gt_out):  # fmt: skip
+    """dissipative_force of pair c into row c of the outputs; returns its gathered node positions
+    and velocities."""
+    kind = ints[c, KIND]
+    xs = np.zeros((6, 3))
+    vs = np.zeros((6, 3))
+    for i in range(N_NODES[kind]):
+        for a in range(3):
+            xs[i, a] = x[ints[c, NODE0 + i], a]
+            vs[i, a] = v[ints[c, NODE0 + i], a]
+    out = np.zeros((6, 3))
+    stick, store = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
+                                     law, fr, m_eq[c], out)  # fmt: skip
+    stick_out[c] = stick
+    # element loops, not slice assignments: numba compiles those with a string-formatting error
+    # path, seconds of a fresh install's first run
+    for a in range(3):
+        gt_out[c, a] = store[a]
+    for i in range(6):
+        for a in range(3):
+            local_force[c, i, a] = out[i, a]
+    return xs, vs
+
+
+# Two kernels rather than one with a tangent flag: numba compiles every branch of a kernel, and
+# the complex-step branch compiles a complex copy of the friction code, which explicit runs never
+# call (a fresh install's first explicit run compiles only dissipative_forces).
 @njit(parallel=True, cache=True)
-def dissipative_terms(x, v, a4, ints, floats, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
-                      want_tangent, local_force, local_tangent, stick_out, gt_out):  # fmt: skip
-    """Damping + friction residual of every pair, and its complex-step Jacobian (18 x 18)."""
+def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                       stick_out, gt_out):  # fmt: skip
+    """Damping + friction residual of every pair (no tangent)."""
     for c in prange(len(ints)):
+        _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, stick_out,
+                    gt_out)  # fmt: skip
+
+
+@njit(parallel=True, cache=True)
+def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                      local_tangent, stick_out, gt_out):  # fmt: skip
+    """Damping + friction residual of every pair and its complex-step Jacobian (18 x 18)."""
+    for c in prange(len(ints)):
+        xs, vs = _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                             stick_out, gt_out)  # fmt: skip
         kind = ints[c, KIND]
         nn = N_NODES[kind]
-        xs = np.zeros((6, 3))
-        vs = np.zeros((6, 3))
+        scale = 0.0
         for i in range(nn):
             for a in range(3):
-                xs[i, a] = x[ints[c, NODE0 + i], a]
-                vs[i, a] = v[ints[c, NODE0 + i], a]
-        out = np.zeros((6, 3))
-        stick, store = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                                         law, fr, m_eq[c], out)  # fmt: skip
-        stick_out[c] = stick
-        gt_out[c] = store
-        local_force[c] = out
-        if want_tangent:
-            scale = 0.0
+                scale = max(scale, abs(xs[i, a]))
+        h = COMPLEX_STEP * max(scale, 1e-300)
+        xc = np.zeros((6, 3), dtype=np.complex128)
+        outc = np.zeros((6, 3), dtype=np.complex128)
+        for j in range(3 * nn):
             for i in range(nn):
                 for a in range(3):
-                    scale = max(scale, abs(xs[i, a]))
-            h = COMPLEX_STEP * max(scale, 1e-300)
-            xc = np.zeros((6, 3), dtype=np.complex128)
-            outc = np.zeros((6, 3), dtype=np.complex128)
-            for j in range(3 * nn):
-                for i in range(nn):
-                    for a in range(3):
-                        xc[i, a] = xs[i, a]
-                xc[j // 3, j % 3] += 1j * h
-                dissipative_force(kind, xc, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                                  law, fr, m_eq[c], outc)  # fmt: skip
-                for r in range(3 * nn):
-                    local_tangent[c, r, j] = outc[r // 3, r % 3].imag / h
+                    xc[i, a] = xs[i, a]
+            xc[j // 3, j % 3] += 1j * h
+            dissipative_force(kind, xc, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
+                              law, fr, m_eq[c], outc)  # fmt: skip
+            for r in range(3 * nn):
+                local_tangent[c, r, j] = outc[r // 3, r % 3].imag / h

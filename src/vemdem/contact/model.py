@@ -21,7 +21,7 @@ from numba import njit
 
 from .broad import candidate_pairs, grain_boxes
 from .forces import evaluate_contacts, force_on_side_a, gap_rates, local_tangent_matrix, scatter_local_forces
-from .friction import FrictionLaw, dissipative_terms
+from .friction import FrictionLaw, dissipative_forces, dissipative_terms
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE
 from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
@@ -274,6 +274,9 @@ class ContactModel:
 
 def _dissipative(model, x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, tangent,
                  local_force, local_tangent, stick_now, gt_now):  # fmt: skip
-    dissipative_terms(x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, model.law_params,
-                      model.friction_params, model.masses_of_pairs(ints), tangent, local_force, local_tangent,
-                      stick_now, gt_now)  # fmt: skip
+    common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.friction_params,
+              model.masses_of_pairs(ints), local_force)  # fmt: skip
+    if tangent:
+        dissipative_terms(*common, local_tangent, stick_now, gt_now)
+    else:
+        dissipative_forces(*common, stick_now, gt_now)

@@ -391,10 +391,15 @@ def _cauchy(Fs, mu, kappa, out):
     for g in range(len(Fs)):
         F = Fs[g]
         psi = neo_hooke(F, mu[g], kappa[g], False, P, A)
-        if psi == np.inf:
-            out[g, :, :] = np.nan
-            continue
-        out[g] = P @ F.T / det3(F)
+        # loops, not out[g] = P @ F.T / J: numba compiles an array slice assignment with a
+        # string-formatting error path (about 5 s of a fresh install's first run, measured)
+        J = det3(F)
+        for i in range(3):
+            for j in range(3):
+                if psi == np.inf:
+                    out[g, i, j] = np.nan
+                else:
+                    out[g, i, j] = (P[i, 0] * F[j, 0] + P[i, 1] * F[j, 1] + P[i, 2] * F[j, 2]) / J
 
 
 def projected_cauchy_stress(elements: GrainElements, x: np.ndarray) -> np.ndarray:
