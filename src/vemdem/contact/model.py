@@ -228,7 +228,7 @@ class ContactModel:
                 v_all[self.n_vertices :] = self._wall_velocities(t)
             local_force = np.zeros((len(ints), 6, 3))
             local_tangent = np.zeros((len(ints), 18, 18)) if tangent else np.zeros((1, 18, 18))
-            _dissipative(self, x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, tangent,
+            _dissipative(self, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
                          local_force, local_tangent, stick_now, gt_now)  # fmt: skip
             extra = np.zeros_like(x_all)
             scatter_local_forces(ints, local_force, extra)
@@ -272,7 +272,7 @@ class ContactModel:
         return np.where(gB < G, mA * mB / (mA + mB), mA)
 
 
-def _dissipative(model, x_all, v_all, a4, ints, floats, c_prev, gt_prev, found, stick_prev, tangent,
+def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
                  local_force, local_tangent, stick_now, gt_now):  # fmt: skip
     common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.friction_params,
               model.masses_of_pairs(ints), local_force)  # fmt: skip
