@@ -51,10 +51,11 @@ from vemdem.contact.pairs import GRAIN_A, GRAIN_B
 from vemdem.contact.walls import box_walls
 from vemdem.geometry import Polyhedron
 from vemdem.geometry.packing import column_packing, pack_height, packing_fraction
-from vemdem.scene import Scene
+from vemdem.model.scene import Scene
 from vemdem.solver import newmark
 from vemdem.solver.explicit import ExplicitIntegrator, advance_explicit, explicit_initial_state
-from vemdem.solver.newmark import NewmarkParameters, RunStats, StepControl, TimeStepTooSmall, advance, initial_state
+from vemdem.solver.newmark import NewmarkParameters, advance, initial_state
+from vemdem.solver.state import RunStats, StepControl, TimeStepTooSmall
 from vemdem.vem.element import evaluate, tangent_matrix
 from vemdem.vem.material import Material
 
@@ -315,11 +316,11 @@ def newton_system(scene: Scene, state, dt: float, params: NewmarkParameters = NE
     candidates = scene.contact.search(state.x, t1, margin=2.0 * travel)
     acc = -a2 * state.v - a3 * state.a
     vel = a5 * state.v + a6 * state.a
-    el = evaluate(scene.elements, state.x, tangent=True)
+    el = scene.bodies.evaluate(state.x, tangent=True)
     cr = scene.contact.evaluate(state.x, t1, candidates, state.history, v=vel, a4=a4, tangent=True)
     M = scene.mass_matrix()
     R = M @ acc.ravel() + el.force.ravel() + cr.force.ravel() - scene.gravity_force().ravel()
-    K = (a1 + params.mass_damping * a4) * M + tangent_matrix(scene.elements, el.blocks) + cr.tangent
+    K = (a1 + params.mass_damping * a4) * M + scene.bodies.tangent_matrix(el.blocks) + cr.tangent
     return sp.csr_matrix(K), R
 
 

@@ -6,7 +6,7 @@
 Prints the FE refinement study and the table beta_i x strain -> VEM force, FE force,
 relative error, and writes docs/fem_comparison.md and docs/img/fem_comparison.png
 (--no-write to skip). Both models use the grain_compression scenario's boundary conditions
-(vemdem.analysis.fem_reference).
+(vemdem.verification.fem_reference).
 """
 
 from __future__ import annotations
@@ -54,8 +54,8 @@ def _init_worker():
 def fem_task(args):
     """One FE compression; if Newton fails, retry with the load steps halved."""
     seed, mode, level, graded = args
-    from vemdem.analysis.fem_reference import run_fem
-    from vemdem.solver.newton import NewtonDivergedError
+    from vemdem.verification.fem_reference import run_fem
+    from vemdem.solver.statics import NewtonDivergedError
 
     grain = grain_of(seed)
     strains = STRAINS
@@ -75,7 +75,7 @@ def fem_task(args):
 
 
 def vem_runs(seeds, modes):
-    from vemdem.analysis.fem_reference import run_vem
+    from vemdem.verification.fem_reference import run_vem
 
     out = {}
     for seed in seeds:
@@ -114,8 +114,8 @@ def solver_timing(study, level):
     (SciPy spsolve) and, if it happens to be installed, pypardiso (not a vemdem dependency)."""
     import scipy.sparse as sp
 
-    from vemdem.analysis.fem_reference import build_tet_model, reference_mesh
-    from vemdem.solver.plates import PlateSetup, prepare_grain
+    from vemdem.verification.fem_reference import build_tet_model, reference_mesh
+    from vemdem.scenarios.plates import PlateSetup, prepare_grain
     from vemdem.solver.linear import solve
 
     seed, mode = study
@@ -175,7 +175,7 @@ def main(argv=None):
             with open(args.save, "wb") as fh:
                 pickle.dump(dict(fem=fem, vem=vem, wall=wall, solver=solver), fh)
 
-    from vemdem.analysis.fem_reference import richardson
+    from vemdem.verification.fem_reference import richardson
 
     reference = {}
     for seed in seeds:
@@ -224,15 +224,15 @@ def report(seeds, modes, levels, uniform, study, fem, vem, reference, wall, solv
       f"{', '.join(map(str, seeds))}: flat caps at both ends. Material: compressible Neo-Hookean (paper eq. 2), "
       f"E = {E / 1e9:g} GPa, nu = {NU}.")  # fmt: skip
     w("- Boundary conditions: those of the `grain_compression` scenario, shared code "
-      "(`solver.plates.compress`, `PlateSetup`, `prepare_grain`): frictionless plates acting on the nodes "
+      "(`scenarios.plates.compress`, `PlateSetup`, `prepare_grain`): frictionless plates acting on the nodes "
       "initially on the caps (within 1e-6 h0 of min/max z): bottom u_z = 0, top u_z = -strain h0; `uniaxial` "
       "pins x, y of one plate vertex and y of another (rigid modes only); `confined` holds the lateral "
       "displacement of every node. In the FE model the plates hold *every* mesh node on the caps.")  # fmt: skip
     w(f"- Load: {len(STRAINS)} steps of {100 * STRAINS[0]:g} % up to {100 * STRAINS[-1]:g} %, one Newton solve "
-      "(`solver.newton.solve_static`, rtol 1e-9, SciPy `spsolve` for the linear systems) per step.")
+      "(`solver.statics.solve_static`, rtol 1e-9, SciPy `spsolve` for the linear systems) per step.")
     w("- VEM: one element per grain, `VemOptions(beta_internal=beta_i)`, sub-mesh `auto` (the scenario's model).")
     w("- FE: TetGen quality mesh (`-pq1.5/10a`) of the same polyhedron, boundary triangles split, linear "
-      "tetrahedra with the same `neo_hooke` energy (`analysis/fem_reference.py`). Graded family: target edge "
+      "tetrahedra with the same `neo_hooke` energy (`verification/fem_reference.py`). Graded family: target edge "
       "h(d) = clip(h_far (d / (h0/2))^(1/2), h_far / 8, h_far) with d the distance to the cap rims (the edges "
       "where a plate meets the free surface: the stress is singular there) and h_far the edge of a regular tet "
       "of volume max_volume; one parameter, max_volume = V / k, refines the whole family.\n")  # fmt: skip

@@ -8,6 +8,7 @@ from vemdem.contact.friction import FrictionLaw
 from vemdem.contact.law import InterfaceLaw, normal_force
 from vemdem.contact.model import ContactHistory, ContactModel, PenetrationError
 from vemdem.contact.walls import MeshWall, Motion, PlaneWall
+from vemdem.io.surfaces import load_mesh_wall
 from vemdem.geometry import cube, rotation_matrix
 
 LAW = InterfaceLaw(activation_gap=2e-5, penalty=1e9)
@@ -169,7 +170,7 @@ def test_wall_from_an_stl_file(tmp_path):
     lid_v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]]) * 1e-3 + [0, 0, 0.5e-3 + GAP]
     soup = lid_v[np.array([[0, 1, 2], [0, 2, 3]])].reshape(-1, 3)  # normals up: flip them
     meshio.write(tmp_path / "lid.stl", meshio.Mesh(soup, [("triangle", np.arange(6).reshape(2, 3))]))
-    lid = MeshWall.from_file(tmp_path / "lid.stl", flip=True)
+    lid = load_mesh_wall(tmp_path / "lid.stl", flip=True)
     assert len(lid.vertices) == 4
     model = ContactModel(c.vertices, [c.faces], np.array([0, 8]), np.array([1.0]), LAW, FRICTION, meshes=[lid])
     res = model.evaluate(c.vertices, 0.0, model.search(c.vertices, 0.0))

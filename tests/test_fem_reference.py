@@ -1,4 +1,4 @@
-"""The tetrahedral FE reference (analysis/fem_reference.py) and the VEM-vs-FE comparison of
+"""The tetrahedral FE reference (verification/fem_reference.py) and the VEM-vs-FE comparison of
 single-grain compression (issue: beta_i in {0.1, 0.25, 0.5} at 5, 10 and 20 % strain).
 
 Full numbers, finer meshes and several seeds: benchmarks/fem_comparison.py, docs/fem_comparison.md.
@@ -7,7 +7,7 @@ Full numbers, finer meshes and several seeds: benchmarks/fem_comparison.py, docs
 import numpy as np
 import pytest
 
-from vemdem.analysis import fem_reference as fr
+from vemdem.verification import fem_reference as fr
 from vemdem.analysis.homogeneous import nominal_axial_stress
 from vemdem.config import apply_schema
 from vemdem.geometry import cube, sand_grain

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
+from vemdem.io.surfaces import load_surface, save_surface
 from vemdem.geometry import (
     DegenerateFaceError,
     DuplicateVerticesError,
@@ -21,9 +22,7 @@ from vemdem.geometry import (
     build_submesh,
     cube,
     l_prism,
-    load_surface,
     sand_grain,
-    save_surface,
     tetrahedron,
     u_prism,
 )

@@ -7,8 +7,9 @@ from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.friction import FrictionLaw
 from vemdem.contact.walls import PlaneWall
 from vemdem.geometry import cube, sand_grain
-from vemdem.scene import Scene
-from vemdem.solver.newmark import NewmarkParameters, StepControl, advance, initial_state
+from vemdem.model.scene import Scene
+from vemdem.solver.newmark import NewmarkParameters, advance, initial_state
+from vemdem.solver.state import StepControl
 from vemdem.vem.material import Material
 
 MAT = Material(90e9, 0.16, 2200.0)

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from vemdem.cli import main
+from vemdem.driver import loop as loop_mod
+from vemdem.driver.checkpoint import CheckpointError
 from vemdem.scenarios import scene as scene_mod
 from vemdem.scenarios.registry import checked_config, example_text
 
@@ -95,7 +97,7 @@ def test_resume_continues_to_the_same_result(tmp_path, monkeypatch, solver):
     cfg = drop_config(duration=0.014, **solver)
     scene_mod.run(cfg, tmp_path / "full")
     # interrupt after the 8th frame (after the impact started), then resume
-    original = scene_mod.save_checkpoint
+    original = loop_mod.save_checkpoint
     calls = {"n": 0}
 
     def interrupting(*args, **kwargs):
@@ -104,10 +106,10 @@ def test_resume_continues_to_the_same_result(tmp_path, monkeypatch, solver):
         if calls["n"] == 9:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(scene_mod, "save_checkpoint", interrupting)
+    monkeypatch.setattr(loop_mod, "save_checkpoint", interrupting)
     with pytest.raises(KeyboardInterrupt):
         scene_mod.run(cfg, tmp_path / "cut")
-    monkeypatch.setattr(scene_mod, "save_checkpoint", original)
+    monkeypatch.setattr(loop_mod, "save_checkpoint", original)
     assert len(rows(tmp_path / "cut/grains.csv")) < len(rows(tmp_path / "full/grains.csv"))
     scene_mod.run(cfg, tmp_path / "cut", resume=True)
     for name in ("grains.csv", "history.csv", "walls.csv"):
@@ -118,9 +120,7 @@ def test_resume_continues_to_the_same_result(tmp_path, monkeypatch, solver):
 def test_resume_refuses_another_config(tmp_path, capsys):
     cfg = drop_config(duration=0.002)
     scene_mod.run(cfg, tmp_path)
-    from vemdem.config import ConfigError
-
-    with pytest.raises(ConfigError, match="different config"):
+    with pytest.raises(CheckpointError, match="different config"):
         scene_mod.run(drop_config(duration=0.003), tmp_path, resume=True)
 
 

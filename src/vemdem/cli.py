@@ -21,6 +21,8 @@ from pathlib import Path
 
 from . import sweep
 from .config import ConfigError, load_toml
+from .driver.checkpoint import CheckpointError
+from .driver.loop import InitialStateError
 from .scenarios.registry import EXAMPLES, checked_config, example_text
 
 
@@ -88,18 +90,16 @@ def cmd_run(args) -> int:
     except ConfigError as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
+    if args.resume and not getattr(module, "RESUMABLE", False):
+        print(f"vemdem: {cfg['scenario']} runs cannot be resumed (they are short)", file=sys.stderr)
+        return 2
     args.out.mkdir(parents=True, exist_ok=True)
     try:
         kwargs = {"resume": True} if args.resume else {}
         summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
-    except ConfigError as exc:
+    except (ConfigError, CheckpointError, InitialStateError) as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
-    except TypeError as exc:
-        if args.resume and "resume" in str(exc):
-            print(f"vemdem: {cfg['scenario']} runs cannot be resumed (they are short)", file=sys.stderr)
-            return 2
-        raise
     except (ArithmeticError, RuntimeError, ValueError, OSError) as exc:
         print(f"vemdem: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"vemdem: results written so far are in {args.out}", file=sys.stderr)

@@ -358,6 +358,28 @@ def angle_of_repose(
     return min(measured, key=lambda pair: pair[1])[0]
 
 
+def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict):
+    """(ReposeResult or None, summary figures) of a settled pile at vertex positions x.
+    pile_height: highest grain top above the floor; runout: largest horizontal distance of a grain
+    centroid from the box axis minus the box's half width (0 for a pile that did not spread); both
+    also for a heap too flat for an angle, which gets angle_of_repose_deg = None and the reason."""
+    centre = tuple(meta.get("centre", (0.0, 0.0)))
+    floor = meta.get("floor", 0.0)
+    spread = float(np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1]).max())
+    figures = {"pile_height": float(x[:, 2].max() - floor), "runout": spread - 0.5 * min(meta["box"])}
+    try:
+        result = angle_of_repose(centroids, grain_size, vertices=x, vertex_grain=vertex_grain, floor=floor,
+                                 centre=centre)  # fmt: skip
+    except ValueError as exc:
+        return None, {"angle_of_repose_deg": None, "angle_of_repose_error": str(exc), **figures}
+    return result, {
+        "angle_of_repose_deg": result.angle_deg,
+        "angle_of_repose_uncertainty_deg": result.uncertainty_deg,
+        **figures,
+        "surface_plan": result.plan,
+    }
+
+
 def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: str = "") -> None:
     """Side view: every centroid at (distance from the axis, height), the surface profile,
     and the fitted flank. Input lengths in m, plotted in mm."""

@@ -246,6 +246,9 @@ class ContactModel:
         return ContactResult(conservative.total_energy, residual[:N], K_grains, ints, floats, reactions, trial, power,
                              pair_force)  # fmt: skip
 
+    def max_wall_speed(self, t: float) -> float:
+        return max((float(np.linalg.norm(w.motion.velocity(t))) for w in self.planes + self.meshes), default=0.0)
+
     def _wall_velocities(self, t):
         vel = [np.repeat(m.motion.velocity(t)[None, :], len(m.vertices), axis=0) for m in self.meshes]
         vel += [np.repeat(pl.motion.velocity(t)[None, :], 3, axis=0) for pl in self.planes]

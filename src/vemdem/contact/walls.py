@@ -12,9 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
 
-from .law import normal_force, normal_potential
 
 
 @dataclass(frozen=True)
@@ -80,54 +78,18 @@ class MeshWall:
     def vertices_at(self, t: float) -> np.ndarray:
         return np.asarray(self.vertices, float) + self.motion.displacement(t)
 
-    @classmethod
-    def from_file(cls, path, motion: Motion | None = None, flip: bool = False) -> "MeshWall":
-        """A rigid wall from an STL/OBJ/PLY surface; coincident vertices are merged. `flip`
-        reverses the faces when the file's normals point away from the grains."""
-        import meshio
 
-        from ..geometry.io import merge_vertices
-
-        mesh = meshio.read(path)
-        tris = np.vstack([b.data for b in mesh.cells if b.type == "triangle"])
-        vertices, faces = merge_vertices(np.asarray(mesh.points, float), tris)
-        used = np.unique(faces)
-        remap = np.full(len(vertices), -1)
-        remap[used] = np.arange(len(used))
-        faces = remap[faces]
-        return cls(vertices[used], faces[:, ::-1] if flip else faces, motion or Motion(), name=str(path))
-
-
-@njit(parallel=True, cache=True)
-def plane_contacts(x, point, normal, law, want_tangent, energy, force, stiffness, gap):
-    """Vertex-plane pairs of every vertex: Phi(d), dPhi/dx = -f_n n, d2Phi/dx2 = k n n^T.
-
-    gap[v] is the signed distance; penetration (d <= 0) gives infinite energy."""
-    gbar = law[0]
-    for v in prange(len(x)):
-        d = (x[v, 0] - point[0]) * normal[0] + (x[v, 1] - point[1]) * normal[1] + (x[v, 2] - point[2]) * normal[2]
-        gap[v] = d
-        if d >= gbar:
-            energy[v] = 0.0
-            stiffness[v] = 0.0
-            for a in range(3):
-                force[v, a] = 0.0
-            continue
-        fn, k = normal_force(d, law)
-        energy[v] = normal_potential(d, law)
-        stiffness[v] = k
-        for a in range(3):
-            force[v, a] = -fn * normal[a]
-
-
-def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0.0)) -> list[PlaneWall]:
-    """Floor and four vertical walls of an open box (normals pointing inside)."""
+def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0.0),
+              removed_at: float = np.inf) -> list[PlaneWall]:  # fmt: skip
+    """Floor and four vertical walls of an open box (normals pointing inside); the vertical ones
+    disappear at `removed_at`."""
     cx, cy = center
     hx, hy = 0.5 * size_x, 0.5 * size_y
+    gone = Motion(removed_at=removed_at)
     return [
-        PlaneWall(np.array([cx, cy, floor_z]), np.array([0.0, 0, 1]), name="floor"),
-        PlaneWall(np.array([cx - hx, cy, floor_z]), np.array([1.0, 0, 0]), name="wall -x"),
-        PlaneWall(np.array([cx + hx, cy, floor_z]), np.array([-1.0, 0, 0]), name="wall +x"),
-        PlaneWall(np.array([cx, cy - hy, floor_z]), np.array([0.0, 1, 0]), name="wall -y"),
-        PlaneWall(np.array([cx, cy + hy, floor_z]), np.array([0.0, -1, 0]), name="wall +y"),
+        PlaneWall(np.array([cx, cy, floor_z]), np.array([0.0, 0.0, 1.0]), name="floor"),
+        PlaneWall(np.array([cx - hx, cy, floor_z]), np.array([1.0, 0.0, 0.0]), gone, "wall -x"),
+        PlaneWall(np.array([cx + hx, cy, floor_z]), np.array([-1.0, 0.0, 0.0]), gone, "wall +x"),
+        PlaneWall(np.array([cx, cy - hy, floor_z]), np.array([0.0, 1.0, 0.0]), gone, "wall -y"),
+        PlaneWall(np.array([cx, cy + hy, floor_z]), np.array([0.0, -1.0, 0.0]), gone, "wall +y"),
     ]

@@ -1,6 +1,5 @@
 """Grain shapes, their validation, mass properties, import and stabilisation sub-mesh."""
 
-from .io import load_surface, save_surface
 from .mass import MassProperties, mass_properties
 from .polyhedron import (
     BadFaceIndexError,

@@ -10,6 +10,7 @@ material and contact settings the pack was made with.
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,7 +48,7 @@ def load_state(path: Path) -> GranularState:
     if not path.is_file():
         raise StateFileError(f"initial_state: no state file at {path} (run a `pack` scenario first)")
     try:
-        d = np.load(path)
+        d = np.load(path, allow_pickle=False)
         if str(d["format"]) != FORMAT:
             raise StateFileError(f"initial_state: {path} has format {d['format']}, expected {FORMAT}")
         vptr = np.concatenate([[0], np.cumsum(d["vertex_count"])])
@@ -56,10 +57,10 @@ def load_state(path: Path) -> GranularState:
         grains = [Polyhedron(vertices[vptr[i] : vptr[i + 1]], faces[fptr[i] : fptr[i + 1]], f"grain {i} of {path.name}")
                   for i in range(len(vptr) - 1)]  # fmt: skip
         x, v, meta = d["x"], d["v"], json.loads(str(d["meta"]))
-    except (KeyError, ValueError, OSError) as exc:
+    except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         if isinstance(exc, StateFileError):
             raise
-        raise StateFileError(f"initial_state: {path} is not a vemdem state file ({exc})") from None
+        raise StateFileError(f"initial_state: {path} is not a readable vemdem state file ({type(exc).__name__})") from None
     if x.shape != (vptr[-1], 3) or v.shape != x.shape or not np.all(np.isfinite(x)) or not np.all(np.isfinite(v)):
         raise StateFileError(f"initial_state: {path} holds positions that do not match its grains or are not finite")
     return GranularState(grains, x, v, meta)

@@ -17,66 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.homogeneous import nominal_axial_stress
-from ..config import Field, REQUIRED, open_unit_interval, poisson, positive, unit_interval
-from ..geometry.factory import GRAIN_SCHEMA, make_grain
-from ..geometry.submesh import METHODS
+from ..config import tables
+from ..config.build import make_grain, material_from, vem_options_from
 from ..io.results import CsvLog, write_json
 from ..io.vtk import PvdSeries
-from ..solver.plates import PlateSetup, compress, prepare_grain, vem_assembler
-from ..vem.element import (
-    VemOptions,
-    build_elements,
-    projected_cauchy_stress,
-)
-from ..vem.material import Material
+from ..model.bodies import VemBodies
+from .plates import PlateSetup, body_assembler, compress, prepare_grain
 
-MATERIAL_SCHEMA = {
-    "E": Field(float, REQUIRED, positive, "Young's modulus (Pa)"),
-    "nu": Field(float, REQUIRED, poisson, "Poisson's ratio"),
-    "density": Field(float, 2200.0, positive, "kg/m^3"),
-}
-
-
-def stabilised(v):
-    return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the element without stabilisation: singular stiffness)"
-
-
-VEM_SCHEMA = {
-    "beta_internal": Field(float, 0.5, stabilised, "beta_i of paper eq. 8"),
-    "beta_mass": Field(float, 1.0, unit_interval, "beta_d of paper eq. 8"),
-    "beta_load": Field(float, 1.0, unit_interval, "beta_e of paper eq. 8"),
-    "submesh": Field(METHODS, "auto", doc="stabilisation sub-mesh"),
-}
-
-SCHEMA = {
-    "scenario": Field(("grain_compression",), REQUIRED),
-    "material": MATERIAL_SCHEMA,
-    "vem": VEM_SCHEMA,
-    "grain": GRAIN_SCHEMA,
-    "loading": {
-        "mode": Field(("uniaxial", "confined"), "uniaxial"),
-        "max_strain": Field(float, 0.3, open_unit_interval, "engineering strain 1 - h/h0"),
-        "steps": Field(int, 30, positive, "load steps"),
-    },
-    "solver": {
-        "rtol": Field(float, 1e-9, positive, "Newton tolerance, relative"),
-        "max_iterations": Field(int, 40, positive),
-    },
-    "output": {
-        "vtk": Field(bool, True, doc="write the ParaView series grain.pvd"),
-        "plot": Field(bool, True, doc="write force_strain.png"),
-    },
-}
-
-
-def material_from(cfg: dict) -> Material:
-    m = cfg["material"]
-    return Material(m["E"], m["nu"], m["density"])
-
-
-def vem_options_from(cfg: dict) -> VemOptions:
-    v = cfg["vem"]
-    return VemOptions(v["beta_internal"], v["beta_mass"], v["beta_load"], v["submesh"])
+SCHEMA = tables.GRAIN_COMPRESSION
 
 
 def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -> dict:
@@ -87,8 +35,8 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     grain = make_grain(cfg["grain"], base_dir, truncate=True)
     grain, pins = prepare_grain(grain, mode)
     material = material_from(cfg)
-    elements = build_elements([grain], material, vem_options_from(cfg))
-    X = elements.reference
+    bodies = VemBodies([grain], material, vem_options_from(cfg))
+    X = bodies.reference
     plates = PlateSetup(X, mode, pins)
 
     steps = cfg["loading"]["steps"]
@@ -97,16 +45,16 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     vtk = PvdSeries(out_dir, "grain") if cfg["output"]["vtk"] else None
     with CsvLog(out_dir / "force_strain.csv", ["strain", "force"]) as log:
         log.write(0.0, 0.0)
-        _write_frame(vtk, 0.0, elements, grain, X.ravel())
+        _write_frame(vtk, 0.0, bodies, grain, X.ravel())
 
         def on_step(k, strain, x, force, result):
             log.write(strain, force)
-            _write_frame(vtk, strain, elements, grain, x)
+            _write_frame(vtk, strain, bodies, grain, x)
             if progress:
                 progress(k, steps, f"strain {strain:.3f} force {force:.4g} N ({result.iterations} Newton it.)")
 
         loaded, iterations = compress(
-            vem_assembler(elements), X, plates, strains[1:], force_scale,
+            body_assembler(bodies), X, plates, strains[1:], force_scale,
             rtol=cfg["solver"]["rtol"], max_iter=cfg["solver"]["max_iterations"], on_step=on_step,
         )  # fmt: skip
     forces = [0.0] + loaded.tolist()
@@ -124,8 +72,8 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
         "grain_height": float(plates.height),
         "n_top_vertices": int(len(plates.top)),
         "n_bottom_vertices": int(len(plates.bottom)),
-        "submesh": elements.submeshes[0].method,
-        "beta_internal": elements.options.beta_internal,
+        "submesh": bodies.elements.submeshes[0].method,
+        "beta_internal": bodies.elements.options.beta_internal,
         "wall_seconds": time.perf_counter() - t_start,
     }
     if cfg["grain"]["shape"] == "cube" and not cfg["grain"]["file"]:
@@ -143,17 +91,17 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     return summary
 
 
-def _write_frame(vtk, strain, elements, grain, xflat):
+def _write_frame(vtk, strain, bodies, grain, xflat):
     if vtk is None:
         return
     x = xflat.reshape(-1, 3)
-    sigma = projected_cauchy_stress(elements, x)[0]
+    sigma = bodies.cauchy_stress(x)[0]
     n_faces = len(grain.faces)
     vtk.write(
         strain,
         x,
         grain.faces,
-        point_data={"displacement": x - elements.reference},
+        point_data={"displacement": x - bodies.reference},
         cell_data={
             "cauchy_stress": np.repeat(sigma.reshape(1, 9), n_faces, axis=0),
             "von_mises": np.full(n_faces, _von_mises(sigma)),

@@ -19,37 +19,22 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.force_strain import cycle_figures, plot_force_strain, write_force_strain_csv
-from ..config import REQUIRED, ConfigError, Field, positive
-from ..contact.walls import Motion, PlaneWall
+from ..config import ConfigError, tables
+from ..config.build import scene_from, solver_options_from
+from ..contact.walls import Motion, PlaneWall, box_walls
+from ..driver.checkpoint import config_fingerprint
+from ..driver.loop import simulate
+from ..driver.summary import run_summary
 from ..io.results import write_json
-from .granular import box_planes, common_tables, initial_state_from, pack_stage_schema, with_defaults
-from .pack import SCHEMA as PACK_SCHEMA
-from .scene import config_fingerprint, run_summary, scene_from, simulate
+from ..solver.api import make_integrator
+from .pack import initial_state_from
 
-SCHEMA = {
-    "scenario": Field(("lid_compression",), REQUIRED),
-    "initial_state": Field(str, "", doc="state.npz written by a pack run [settle the [pack] table first]"),
-    "pack": pack_stage_schema(PACK_SCHEMA),
-    "lid": {
-        "start": Field(float, 7e-3, positive, "lid height above the floor at the start and the end (m)"),
-        "end": Field(float, 4.9e-3, positive, "lowest lid height (m)"),
-        "speed": Field(float, 0.02, positive, "lid speed (m/s): slow against the grains' settling speed"),
-        "frames": Field(int, 100, positive, "frames (force samples) per phase"),
-    },
-    **common_tables(mu_s=0.15, mu_d=0.15, every=1e-3),
-}
-SCHEMA["output"] = {"vtk": SCHEMA["output"]["vtk"]}  # frames come from lid.frames
-# A light normal damping: with the scenes' 0.5 the viscous force of the lid's stiff contacts
-# (2 zeta sqrt(k m), m mass-scaled) rivalled the elastic one at the lid's speed, and the force
-# fell from 15 kN to 0.4 kN and back when the lid turned; with 0.05 the curve is continuous there
-# (the paper-compression run, docs/results.md)
-SCHEMA["contact"] = with_defaults(SCHEMA["contact"], damping_ratio=0.05)
+RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
+SCHEMA = tables.LID_COMPRESSION
 
 
 def lid_wall(lid: dict, centre) -> tuple[PlaneWall, float]:
     """The lid (normal down) and the duration of the cycle."""
-    if lid["end"] >= lid["start"]:
-        raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
     half = (lid["start"] - lid["end"]) / lid["speed"]
     motion = Motion((0.0, half, 2.0 * half), ((0.0, 0.0, 0.0), (0.0, 0.0, lid["end"] - lid["start"]), (0.0, 0.0, 0.0)))
     point = np.array([centre[0], centre[1], lid["start"]])
@@ -80,10 +65,12 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     if top >= cfg["lid"]["start"]:
         raise ConfigError(f"lid.start: the pack reaches {top * 1e3:.3g} mm above the floor, above the lid's start "
                           f"{cfg['lid']['start'] * 1e3:.3g} mm (settle fewer grains or raise lid.start)")  # fmt: skip
-    scene = scene_from(initial.grains, cfg, box_planes(tuple(meta["box"]), tuple(meta["centre"]), meta["floor"]) + [lid])
+    scene = scene_from(initial.grains, cfg, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])) + [lid])
+    integrator = make_integrator(solver_options_from(cfg), scene)
     every = 0.5 * duration / cfg["lid"]["frames"]
-    result = simulate(scene, cfg["solver"], out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
-                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v, resume=resume,
+    resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
+    result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
+                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v, resume=resume_here,
                       progress=progress)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
@@ -92,9 +79,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
         figures = {"cycle_error": str(exc)}
     plot_force_strain(phase, strain, force, out_dir / "force_strain.png", figures if "peak_force" in figures else None)
-    summary = run_summary("lid_compression", cfg, scene, result, t_start)
+    summary = run_summary("lid_compression", scene, result, t_start)
     summary.update(figures)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
+    summary["config_fingerprint"] = config_fingerprint(cfg)
     write_json(out_dir / "summary.json", summary)
     return summary

@@ -6,49 +6,33 @@ below `settle.kinetic_threshold` m g d (scenarios.granular.at_rest). Outputs in 
 (the settled pack, the `initial_state` of pile_collapse and lid_compression), summary.json
 (n_grains, pack_height, packing_fraction, settled, ...) and the scene outputs (history.csv,
 grains.csv, walls.csv, grains.pvd, checkpoint.npz; `--resume` continues a run).
+
+The pack stage of pile_collapse and lid_compression (`[pack]` instead of `initial_state`) runs
+here too (`initial_state_from`): settled into DIR/pack, reused only when its summary carries the
+fingerprint of the same pack config, resumed with the run.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
-from ..config import REQUIRED, ConfigError, Field, positive
+from ..analysis.pack import pack_measures
+from ..config import ConfigError, tables
+from ..config.build import resolve_path, scene_from, solver_options_from
+from ..contact.walls import box_walls
+from ..driver.checkpoint import config_fingerprint
+from ..driver.loop import simulate
+from ..driver.summary import run_summary
 from ..geometry.packing import column_packing
 from ..io.results import write_json
-from ..io.state import save_state
-from .granular import SETTLING_DAMPING, at_rest, box_planes, common_tables, kinetic_ratio, pack_measures, with_defaults
-from .scene import config_fingerprint, run_summary, scene_from, simulate
+from ..io.state import StateFileError, load_state, save_state
+from ..solver.api import make_integrator
+from .granular import at_rest, kinetic_ratio
 
-
-def _fraction(v):
-    return None if 0 <= v < 1 else "must be in [0, 1)"
-
-
-SCHEMA = {
-    "scenario": Field(("pack",), REQUIRED),
-    "n_grains": Field(int, 515, positive, "number of grains"),
-    "seed": Field(int, 0, doc="seeds the sizes, shapes, orientations and positions"),
-    "grains": {
-        "size": Field(float, 1.45e-3, positive, "mean equivalent diameter (m)"),
-        "size_spread": Field(float, 0.1, _fraction, "sizes uniform in size (1 +- size_spread)"),
-        "vertices": Field(int, 30, lambda v: None if v >= 8 else "must be >= 8", "vertices per grain"),
-        "elongation": Field(float, 0.8, lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
-        "flatness": Field(float, 0.8, lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
-        "roughness": Field(float, 0.15, _fraction),
-        "clearance": Field(float, 0.02, lambda v: None if v >= 0 else "must be >= 0",
-                           "gap between grains in the column, in circumscribed radii"),  # fmt: skip
-    },
-    "box": {
-        "width": Field(float, 8e-3, positive, "x side (m)"),
-        "depth": Field(float, 8e-3, positive, "y side (m)"),
-    },
-    **common_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
-}
-# Settling is preparation, not the experiment: a mass damping of 20 1/s caps the fall at about
-# g / 20 = 0.5 m/s, so grains from the top of a 100 mm column do not hit the pack at 1.4 m/s,
-# where the barrier stiffens and the explicit step fell to 6e-7 s (docs/results.md)
-SCHEMA["solver"] = with_defaults(SCHEMA["solver"], mass_damping=SETTLING_DAMPING)
+RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
+SCHEMA = tables.PACK
 
 
 def place(cfg: dict):
@@ -67,14 +51,15 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     packing = place(cfg)
-    scene = scene_from(packing.grains, cfg, box_planes(packing.box))
-    lumped = cfg["solver"]["integrator"] == "explicit"
+    scene = scene_from(packing.grains, cfg, box_walls(*packing.box))
+    integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
-    result = simulate(scene, cfg["solver"], out_dir, duration=settle["max_time"], every=cfg["output"]["every"],
-                      vtk=cfg["output"]["vtk"], fingerprint=config_fingerprint(cfg), resume=resume,
-                      progress=progress, stop=at_rest(scene, settle, lumped))  # fmt: skip
+    fingerprint = config_fingerprint(cfg)
+    result = simulate(scene, integrator, out_dir, duration=settle["max_time"], every=cfg["output"]["every"],
+                      vtk=cfg["output"]["vtk"], fingerprint=fingerprint, resume=resume, progress=progress,
+                      stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
-    measures = pack_measures(scene, state.x, packing.box)
+    measures = pack_measures(scene.bodies.volume, scene.grain_centroids(state.x), packing.box)
     meta = {
         "scenario": "pack",
         "box": list(packing.box),
@@ -83,14 +68,66 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         "grain_size": cfg["grains"]["size"],
         "seed": cfg["seed"],
         "time": state.t,
+        "mass_scaling": scene.mass_scaling,
         **measures,
     }
     save_state(out_dir / "state.npz", packing.grains, state.x, state.v, meta)
-    summary = run_summary("pack", cfg, scene, result, t_start)
+    summary = run_summary("pack", scene, result, t_start)
     summary.update(measures)
     summary["settled"] = result.stopped_early
-    summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, lumped)
+    summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["column_height"] = packing.column_height
     summary["state_file"] = "state.npz"
+    summary["config_fingerprint"] = fingerprint
     write_json(out_dir / "summary.json", summary)
     return summary
+
+
+# ---------------------------------------------------------------------------- the pack stage
+def pack_config(cfg: dict) -> dict:
+    """A complete `pack` config from a pile_collapse / lid_compression config's [pack] table; the
+    pack settles with the same material, vem and solver settings, its own friction and the
+    default normal damping (lid_compression's light damping is for the lid cycle)."""
+    table = dict(cfg["pack"])
+    contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None)
+    solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
+    settle = {k: field.default for k, field in SCHEMA["settle"].items()}
+    settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
+    return {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
+            "contact": contact, "solver": solver, "settle": settle,
+            "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
+
+
+def _stage_fingerprint(pack_dir: Path):
+    try:
+        return json.loads((pack_dir / "summary.json").read_text()).get("config_fingerprint")
+    except (OSError, ValueError):
+        return None
+
+
+def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume: bool = False):
+    """The settled pack a scenario starts from: `initial_state` (relative to the config file) when
+    given, else a pack settled now into DIR/pack. A finished pack stage is reused only when it was
+    made by the same pack config; an interrupted one is continued by --resume."""
+    if not cfg["initial_state"]:
+        pack_cfg = pack_config(cfg)
+        pack_dir = Path(out_dir) / "pack"
+        path = pack_dir / "state.npz"
+        wanted = config_fingerprint(pack_cfg)
+        if (pack_dir / "summary.json").is_file():
+            if _stage_fingerprint(pack_dir) != wanted:
+                raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
+                                  "use another --out, or --overwrite to settle it again")  # fmt: skip
+        else:
+            resume_pack = resume and (pack_dir / "checkpoint.npz").is_file()
+            stage = progress and (lambda i, n, text="": progress(i, n, "pack: " + text))
+            run(pack_cfg, pack_dir, progress=stage, resume=resume_pack)
+    else:
+        path = resolve_path(cfg["initial_state"], base_dir)
+    try:
+        state = load_state(path)
+    except StateFileError as exc:
+        raise ConfigError(str(exc)) from None
+    if "box" not in state.meta:
+        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
+    return state, path

@@ -6,6 +6,7 @@ from importlib import import_module
 from importlib.resources import files
 
 from ..config import ConfigError, apply_schema
+from ..config.tables import check_rules
 
 SCENARIOS = {
     "grain_compression": "vemdem.scenarios.grain_compression",
@@ -37,7 +38,9 @@ def checked_config(raw: dict) -> tuple[dict, object]:
     if "scenario" not in raw:
         raise ConfigError("scenario: required key is missing")
     module = scenario_module(raw["scenario"])
-    return apply_schema(raw, module.SCHEMA), module
+    cfg = apply_schema(raw, module.SCHEMA)
+    check_rules(cfg)
+    return cfg, module
 
 
 def example_text(name: str) -> str:

@@ -30,22 +30,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from ..contact.ccd import closing_time, grain_speeds, plane_distances
 from ..contact.forces import pair_inverse_masses
 from ..contact.law import normal_stiffness
 from ..contact.model import PenetrationError
 from ..contact.pairs import GAP
-from ..scene import Scene
-from ..vem.element import InvertedElementError, evaluate
-from .newmark import (
-    RunStats,
-    State,
-    StepControl,
-    StepInfo,
-    StepRejected,
-    TimeStepTooSmall,
-)
+from ..model.bodies import InvertedElementError
+from ..model.scene import Scene
+from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
 
 @dataclass
@@ -57,35 +50,17 @@ class ExplicitParameters:
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha m v
 
 
-def grain_critical_steps(scene: Scene) -> np.ndarray:
-    """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the
-    tangent block of the grain, m its lumped vertex masses). Grains with the same number of
-    vertices are solved as one batch."""
-    el = scene.elements
-    blocks = evaluate(el, el.reference, force=False, tangent=True).blocks
-    counts = np.diff(el.vertex_ptr)
-    out = np.empty(scene.n_grains)
-    for n in np.unique(counts):
-        grains = np.flatnonzero(counts == n)
-        K = np.stack([blocks[el.block_ptr[g] : el.block_ptr[g + 1]] for g in grains]).reshape(-1, 3 * n, 3 * n)
-        m = np.stack([np.repeat(scene.mass.lumped[el.vertex_ptr[g] : el.vertex_ptr[g + 1]], 3) for g in grains])
-        s = 1.0 / np.sqrt(m)
-        lam = np.linalg.eigvalsh(s[:, :, None] * K * s[:, None, :])[:, -1]
-        out[grains] = 2.0 / np.sqrt(lam)
-    return out
-
-
 class ExplicitIntegrator:
     """State that persists between steps of one run: critical steps, inverse masses, Verlet list."""
 
     def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters()):
         self.scene = scene
         self.params = params
-        self.grain_dt = float(grain_critical_steps(scene).min())
-        self.inv_mass = 1.0 / scene.mass.lumped[:, None]
-        self.f_grav = scene.mass.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
+        self.grain_dt = float(scene.bodies.critical_steps().min())
+        self.inv_mass = 1.0 / scene.bodies.lumped[:, None]
+        self.f_grav = scene.bodies.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
         n_wall_nodes = len(scene.contact.wall_nodes(0.0))
-        self.inv_mass_all = np.concatenate([1.0 / scene.mass.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
+        self.inv_mass_all = np.concatenate([1.0 / scene.bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
         zeta = scene.contact.friction.damping_ratio
         self.damping_factor = np.sqrt(1.0 + zeta * zeta) - zeta
         self.skin = params.skin_gaps * scene.contact.law.activation_gap
@@ -118,7 +93,7 @@ class ExplicitIntegrator:
     def forces(self, x, v, t, history):
         """(acceleration, strain energy, contact result) at x with velocity v."""
         scene = self.scene
-        el = evaluate(scene.elements, x)
+        el = scene.bodies.evaluate(x)
         cr = scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v)
         acc = (self.f_grav - el.force - cr.force) * self.inv_mass - self.params.mass_damping * v
         if not np.all(np.isfinite(acc)):
@@ -150,8 +125,8 @@ class ExplicitIntegrator:
         scene, f, e = self.scene, self.params.approach_fraction, self.params.entry_fraction
         gbar = scene.contact.law.activation_gap
         G = scene.n_grains
-        vptr = scene.elements.vertex_ptr
-        c, r = _grain_speeds(state.v, scene.mass.lumped, vptr)
+        vptr = scene.bodies.vertex_ptr
+        c, r = grain_speeds(state.v, scene.bodies.lumped, vptr)
         limit = np.inf
         if len(ints):
             rate = scene.contact.rates(state.x, state.v, state.t, ints, floats)
@@ -172,9 +147,9 @@ class ExplicitIntegrator:
             if not plane.motion.active(state.t):
                 continue
             n = plane.normal
-            dist = _plane_distances(state.x, vptr, plane.point_at(state.t), n)
+            dist = plane_distances(state.x, vptr, plane.point_at(state.t), n)
             speed = np.maximum(-(c @ n) + plane.motion.velocity(state.t) @ n, 0.0) + r
-            limit = min(limit, _closing_time(np.maximum(dist, gbar), speed, gbar, e))
+            limit = min(limit, closing_time(np.maximum(dist, gbar), speed, gbar, e))
         return limit
 
     def _mesh_velocities(self, t):
@@ -192,7 +167,7 @@ class ExplicitIntegrator:
             raise StepRejected("a contact gap closed")
         v = v_half + 0.5 * dt * acc
         power = cr.dissipation_power + self.params.mass_damping * float(
-            np.sum(self.scene.mass.lumped[:, None] * v_half**2)
+            np.sum(self.scene.bodies.lumped[:, None] * v_half**2)
         )
         new = State(
             t1,
@@ -216,49 +191,8 @@ class ExplicitIntegrator:
         return new, info
 
 
-@njit(cache=True)
-def _grain_speeds(v, mass, vptr):
-    """Mass-weighted centre velocity c of each grain and r, its vertices' largest speed about c."""
-    G = len(vptr) - 1
-    c = np.zeros((G, 3))
-    r = np.zeros(G)
-    for g in range(G):
-        m = 0.0
-        for i in range(vptr[g], vptr[g + 1]):
-            m += mass[i]
-            for a in range(3):
-                c[g, a] += mass[i] * v[i, a]
-        for a in range(3):
-            c[g, a] /= m
-        for i in range(vptr[g], vptr[g + 1]):
-            s = (v[i, 0] - c[g, 0]) ** 2 + (v[i, 1] - c[g, 1]) ** 2 + (v[i, 2] - c[g, 2]) ** 2
-            r[g] = max(r[g], np.sqrt(s))
-    return c, r
-
-
-@njit(cache=True)
-def _plane_distances(x, vptr, point, normal):
-    """Signed distance of each grain's lowest vertex over the plane (point, normal)."""
-    G = len(vptr) - 1
-    out = np.full(G, np.inf)
-    for g in range(G):
-        for i in range(vptr[g], vptr[g + 1]):
-            d = (x[i, 0] - point[0]) * normal[0] + (x[i, 1] - point[1]) * normal[1] + (x[i, 2] - point[2]) * normal[2]
-            out[g] = min(out[g], d)
-    return out
-
-
-def _closing_time(d, speed, gbar, f) -> float:
-    """Smallest (max(d - gbar, 0) + f min(d, gbar)) / speed over pairs that approach."""
-    moving = speed > 0
-    if not moving.any():
-        return np.inf
-    d, speed = d[moving], speed[moving]
-    return float(np.min((np.maximum(d - gbar, 0.0) + f * np.minimum(d, gbar)) / speed))
-
-
 def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None, v0=None, t0: float = 0.0) -> State:
-    x = scene.elements.reference.copy() if x0 is None else np.array(x0, float)
+    x = scene.bodies.reference.copy() if x0 is None else np.array(x0, float)
     v = np.zeros_like(x) if v0 is None else np.array(v0, float)
     acc, _, cr = integrator.forces(x, v, t0, None)
     return State(t0, x, v, acc, cr.trial_history)

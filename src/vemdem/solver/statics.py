@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..vem.element import InvertedElementError
+from ..model.bodies import InvertedElementError
 from .linear import solve
 
 

@@ -4,7 +4,7 @@ The plates are roller conditions on the vertices that touch them (within PLATE_T
 height): the bottom ones keep u_z = 0, the top ones move down by strain * h0; `confined` also
 holds the lateral displacement of every vertex at zero. In `uniaxial` mode the remaining rigid
 modes are removed by pins (see PlateSetup). Used by the `grain_compression` scenario and by the
-refined FE reference (analysis/fem_reference.py), which load the VEM and the FE mesh alike.
+refined FE reference (verification/fem_reference.py), which load the VEM and the FE mesh alike.
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..geometry.shapes import rotation_matrix
-from ..vem.element import evaluate, tangent_matrix
-from .newton import Assemble, solve_static
+from ..solver.statics import Assemble, solve_static
 
 PLATE_TOL = 1e-6
 
@@ -103,12 +102,13 @@ def compress(
     return np.array(forces), iterations
 
 
-def vem_assembler(elements) -> Assemble:
-    """The one-element-per-grain VEM as an `assemble` callable for `compress` / `solve_static`."""
+def body_assembler(bodies) -> Assemble:
+    """A body model (one virtual element per grain) as an `assemble` callable for `compress` /
+    `solve_static`."""
 
     def assemble(xflat, want_tangent):
-        ev = evaluate(elements, xflat.reshape(-1, 3), force=True, tangent=want_tangent)
-        K = tangent_matrix(elements, ev.blocks) if want_tangent else None
+        ev = bodies.evaluate(xflat.reshape(-1, 3), force=True, tangent=want_tangent)
+        K = bodies.tangent_matrix(ev.blocks) if want_tangent else None
         return ev.total_energy, ev.force.ravel(), K
 
     return assemble

@@ -13,7 +13,7 @@ scatter map computed once (the CSR pattern of the mesh), so no Python loop visit
 
 `compress_fem` and `compress_vem` run the plate compression of
 `vemdem.scenarios.grain_compression` (same grain orientation, plates, pins and Newton
-solver, `solver.plates.compress`) on the FE mesh and on the one-element VEM, so that
+solver, `scenarios.plates.compress`) on the FE mesh and on the one-element VEM, so that
 the two force-strain curves differ only by the discretisation. In the FE model the plates
 hold every mesh node on the grain's flat caps.
 
@@ -36,8 +36,9 @@ from numba import njit, prange
 
 from ..geometry.polyhedron import Polyhedron
 from ..geometry.submesh import signed_tet_volumes
-from ..solver.plates import PLATE_TOL, PlateSetup, compress, prepare_grain, vem_assembler
-from ..vem.element import InvertedElementError, VemOptions, build_elements, tet_gradients
+from ..model.bodies import VemBodies
+from ..scenarios.plates import PLATE_TOL, PlateSetup, compress, prepare_grain, body_assembler
+from ..vem.element import InvertedElementError, VemOptions, tet_gradients
 from ..vem.material import Material, neo_hooke
 
 
@@ -411,12 +412,12 @@ def run_vem(grain: Polyhedron, material: Material, beta_internal: float, strains
     t0 = time.perf_counter()
     material = ensure_material(material)
     turned, pins = prepare_grain(grain, mode)
-    elements = build_elements([turned], material, VemOptions(beta_internal=beta_internal, submesh=submesh))
-    X = elements.reference
+    bodies = VemBodies([turned], material, VemOptions(beta_internal=beta_internal, submesh=submesh))
+    X = bodies.reference
     plates = PlateSetup(X, mode, pins)
     force_scale = material.E * turned.volume ** (2 / 3)
     pen = []
-    forces, its = compress(vem_assembler(elements), X, plates, strains, force_scale, rtol=rtol, max_iter=max_iter,
+    forces, its = compress(body_assembler(bodies), X, plates, strains, force_scale, rtol=rtol, max_iter=max_iter,
                            on_step=_tracker(X, plates, pen))  # fmt: skip
     return CompressionRun(np.asarray(strains, float), forces, len(X), 1, its, time.perf_counter() - t0, np.array(pen))
 

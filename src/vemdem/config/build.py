@@ -1,0 +1,131 @@
+"""A checked config -> typed options and a scene. Mass scaling is applied here, once, and recorded
+in the scene (`Scene.mass_scaling`), from where every summary reports it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..contact.defaults import default_contact_laws
+from ..contact.walls import Motion, PlaneWall
+from ..geometry.polyhedron import GeometryError, Polyhedron
+from ..geometry.shapes import cube, l_prism, rotation_matrix, sand_grain, tetrahedron
+from ..io.surfaces import load_mesh_wall, load_surface
+from ..model.scene import Scene
+from ..solver.api import SolverOptions
+from ..vem.element import VemOptions
+from ..vem.material import Material
+from .schema import ConfigError
+
+
+def resolve_path(name: str, base_dir) -> Path:
+    """A file named in a config: relative to the config file's folder (THE rule for every key)."""
+    path = Path(name)
+    return path if path.is_absolute() or base_dir is None else Path(base_dir) / path
+
+
+def material_from(cfg: dict, mass_scaling: float = 1.0) -> Material:
+    m = cfg["material"]
+    return Material(m["E"], m["nu"], m["density"] * mass_scaling)
+
+
+def vem_options_from(cfg: dict) -> VemOptions:
+    v = cfg["vem"]
+    return VemOptions(v["beta_internal"], v["beta_mass"], v["beta_load"], v["submesh"])
+
+
+def solver_options_from(cfg: dict) -> SolverOptions:
+    s = cfg["solver"]
+    keys = ("integrator", "beta", "gamma", "dt", "dt_min", "dt_max", "max_iterations", "impact_steps",
+            "entry_fraction", "safety", "mass_damping")  # fmt: skip
+    return SolverOptions(**{k: s[k] for k in keys})
+
+
+# ---------------------------------------------------------------------------- grains
+def make_grain(spec: dict, base_dir=None, truncate: bool = False) -> Polyhedron:
+    """A grain from a checked grain table (`shape` or `file`); geometry errors become ConfigErrors."""
+    shape = "file" if spec.get("file") else spec["shape"]
+    try:
+        if shape == "file":
+            if not spec.get("file"):
+                raise ConfigError("grain.file: required when shape = 'file'")
+            return load_surface(resolve_path(spec["file"], base_dir))
+        if shape == "cube":
+            return cube(spec["size"])
+        if shape == "tetrahedron":
+            t = tetrahedron()
+            return t.translated(-t.centroid).scaled(spec["size"] / (6 * t.volume / np.pi) ** (1 / 3))
+        if shape == "l-prism":
+            return l_prism(spec["size"], 0.5 * spec["size"])
+        return sand_grain(size=spec["size"], n_vertices=spec["vertices"], elongation=spec["elongation"],
+                          flatness=spec["flatness"], roughness=spec["roughness"], seed=spec["seed"],
+                          truncate=spec["truncate"] if truncate else None)  # fmt: skip
+    except GeometryError as exc:
+        raise ConfigError(f"grain: {exc}") from None
+
+
+def place_grain(spec: dict, base_dir=None) -> Polyhedron:
+    grain = make_grain(spec, base_dir)
+    grain = grain.translated(-grain.centroid).rotated(rotation_matrix(spec["rotation"]))
+    return grain.translated(spec["position"])
+
+
+# ---------------------------------------------------------------------------- walls
+def _motion(spec: dict, where: str) -> Motion:
+    try:
+        return Motion(tuple(spec["times"]), tuple(tuple(d) for d in spec["displacements"]),
+                      np.inf if spec["removed_at"] is None else spec["removed_at"])  # fmt: skip
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def build_walls(specs: list, base_dir=None):
+    planes, meshes = [], []
+    for i, spec in enumerate(specs):
+        where = f"walls[{i}]"
+        name = spec["name"] or f"wall {i}"
+        motion = _motion(spec, where)
+        if spec["type"] == "plane":
+            if np.linalg.norm(spec["normal"]) == 0:
+                raise ConfigError(f"{where}.normal: must not be the zero vector")
+            planes.append(PlaneWall(np.array(spec["point"], float), np.array(spec["normal"], float), motion, name))
+            continue
+        if not spec["file"]:
+            raise ConfigError(f"{where}.file: required for a mesh wall")
+        try:
+            wall = load_mesh_wall(resolve_path(spec["file"], base_dir), motion, flip=spec["flip"])
+        except (GeometryError, ValueError) as exc:
+            raise ConfigError(f"{where}.file: {exc}") from None
+        meshes.append(replace(wall, name=spec["name"] or wall.name))
+    return planes, meshes
+
+
+# ---------------------------------------------------------------------------- the scene
+def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scene:
+    """A scene of placed grains and walls with the config's material, vem, contact and solver
+    (mass scaling) settings; the contact laws' scales come from the mean grain size."""
+    scaling = cfg["solver"]["mass_scaling"]
+    # mass scaling: every mass-born quantity (inertia, weight, contact force scale) grows alike, so
+    # rigid-grain kinematics are unchanged and only the elastic (and explicit-step) time scales move
+    material = material_from(cfg, scaling)
+    size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in grains]))
+    contact = cfg["contact"]
+    overrides = {k: v for k, v in contact.items() if k not in ("mu_s", "mu_d") and v is not None}
+    try:
+        law, friction = default_contact_laws(size, material.E, material.density, float(np.linalg.norm(cfg["gravity"])),
+                                             contact["mu_s"], contact["mu_d"], **overrides)  # fmt: skip
+    except ValueError as exc:
+        raise ConfigError(f"contact: {exc}") from None
+    return Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
+                       vem_options_from(cfg), mass_scaling=scaling)  # fmt: skip
+
+
+def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
+    """The `scene` scenario's grains, walls and initial vertex velocities."""
+    grains = [place_grain(g, base_dir) for g in cfg["grains"]]
+    planes, meshes = build_walls(cfg["walls"], base_dir)
+    scene = scene_from(grains, cfg, planes, meshes)
+    v0 = np.vstack([np.tile(g["velocity"], (grain.n_vertices, 1)) for g, grain in zip(cfg["grains"], grains)])
+    return scene, v0

@@ -1,0 +1,306 @@
+"""Every config table of vemdem, and the cross-field rules: THE room that knows key names.
+
+A scenario's schema is composed here from the shared tables (material, vem, grains, walls,
+contact, solver, settle, output); `config.build` turns a checked config into typed options and
+a scene. Key names are a contract with users (docs, examples, sweeps): extend, never rename.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from ..geometry.submesh import METHODS
+from .schema import (
+    REQUIRED,
+    ConfigError,
+    Field,
+    TableList,
+    non_negative,
+    open_unit_interval,
+    poisson,
+    positive,
+    unit_interval,
+    vector3,
+)
+
+# -------------------------------------------------------------------------------- helpers
+SHAPES = ("cube", "tetrahedron", "l-prism", "random", "file")
+INTEGRATORS = ("implicit", "explicit")
+LINEAR_SOLVERS = ("auto", "direct", "grain-block")
+BODY_MODELS = ("flexible",)
+MAX_FRAMES = 100_000  # more frames than this is a typo in output.every, not a wish
+
+
+def with_defaults(schema: dict, **defaults) -> dict:
+    """A copy of a schema table with other default values (the keys stay those of `schema`)."""
+    out = dict(schema)
+    for key, value in defaults.items():
+        out[key] = replace(schema[key], default=value)
+    return out
+
+
+def _in(lo, hi, lo_open=False, hi_open=False):
+    def check(v):
+        ok = (lo < v if lo_open else lo <= v) and (v < hi if hi_open else v <= hi)
+        return None if ok else f"must be in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+
+    return check
+
+
+def _at_least(lo):
+    return lambda v: None if v >= lo else f"must be >= {lo:g}"
+
+
+def _stabilised(v):
+    return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the element without stabilisation: singular stiffness)"
+
+
+# -------------------------------------------------------------------------------- shared tables
+MATERIAL = {
+    "E": Field(float, REQUIRED, positive, "Young's modulus (Pa)"),
+    "nu": Field(float, REQUIRED, poisson, "Poisson's ratio"),
+    "density": Field(float, 2200.0, positive, "kg/m^3"),
+}
+
+VEM = {
+    "beta_internal": Field(float, 0.5, _stabilised, "beta_i of paper eq. 8"),
+    "beta_mass": Field(float, 1.0, unit_interval, "beta_d of paper eq. 8"),
+    "beta_load": Field(float, 1.0, unit_interval, "beta_e of paper eq. 8"),
+    "submesh": Field(METHODS, "auto", doc="stabilisation sub-mesh"),
+}
+
+GRAIN = {
+    "shape": Field(SHAPES, "cube", doc="grain shape; 'file' needs the key file"),
+    "file": Field(str, "", doc="surface file (STL/OBJ/PLY), relative to the config file"),
+    "size": Field(float, 1.45e-3, positive, "cube edge, or equivalent diameter of other shapes (m)"),
+    "vertices": Field(int, 30, _at_least(4), "random: number of vertices"),
+    "elongation": Field(float, 0.8, _in(0, 1, lo_open=True), "random: intermediate/long axis"),
+    "flatness": Field(float, 0.8, _in(0, 1, lo_open=True), "random: short/intermediate axis"),
+    "roughness": Field(float, 0.15, _in(0, 0.5, hi_open=True), "random: relative radial perturbation"),
+    "truncate": Field(float, 0.7, open_unit_interval, "random: flat ends at |z| <= truncate * c (compression)"),
+    "seed": Field(int, 0, non_negative, "random: seed; same seed, same grain"),
+}
+
+SCENE_GRAIN = {k: v for k, v in GRAIN.items() if k != "truncate"}
+SCENE_GRAIN.update(
+    {
+        "position": Field(list, REQUIRED, vector3, "centroid (m)"),
+        "rotation": Field(list, [0.0, 0.0, 0.0], vector3, "rotation vector (rad)"),
+        "velocity": Field(list, [0.0, 0.0, 0.0], vector3, "initial velocity (m/s)"),
+    }
+)
+
+WALL = {
+    "type": Field(("plane", "mesh"), REQUIRED),
+    "point": Field(list, [0.0, 0.0, 0.0], vector3, "plane: a point on it"),
+    "normal": Field(list, [0.0, 0.0, 1.0], vector3, "plane: normal pointing towards the grains"),
+    "file": Field(str, "", doc="mesh: surface file (STL/OBJ/PLY), relative to the config file"),
+    "flip": Field(bool, False, doc="mesh: reverse the faces (normals must face the grains)"),
+    "name": Field(str, "", doc="label in outputs"),
+    "removed_at": Field(float, None, non_negative, "time at which the wall disappears (s)"),
+    "times": Field(list, [0.0], doc="times of the piecewise-linear displacement history (s)"),
+    "displacements": Field(list, [[0.0, 0.0, 0.0]], doc="rigid displacement at each time (m)"),
+}
+
+CONTACT = {
+    "mu_s": Field(float, 0.0, non_negative, "static friction coefficient"),
+    "mu_d": Field(float, None, non_negative, "dynamic friction coefficient [mu_s]"),
+    "activation_gap": Field(float, None, positive, "m [0.01 grain size]"),
+    "penalty": Field(float, None, positive, "eps1 [from 10 grain weights at the switch gap]"),
+    "switch_factor": Field(float, None, open_unit_interval),
+    "penalty_exponent": Field(float, None, _at_least(1)),
+    "barrier_exponent": Field(float, None, lambda v: None if v < -1 else "must be < -1"),
+    "tangential_penalty": Field(float, None, positive, "N/m [the normal stiffness at the switch gap]"),
+    "tangential_viscosity": Field(float, None, non_negative, "N s/m [0]"),
+    "damping_ratio": Field(float, None, non_negative, "normal damping ratio [0.5]"),
+}
+
+SOLVER = {
+    "integrator": Field(INTEGRATORS, "implicit", doc="implicit Newmark or explicit central differences"),
+    "linear": Field(LINEAR_SOLVERS, "auto", doc="implicit: linear solver of the Newton systems (docs/linear-solvers.md)"),
+    "beta": Field(float, 0.3, _in(0, 0.5, lo_open=True)),
+    "gamma": Field(float, 0.5, _in(0.5, 1)),
+    "dt": Field(float, 1e-5, positive, "initial time step (s)"),
+    "dt_min": Field(float, 1e-10, positive, "the run stops below this step (s)"),
+    "dt_max": Field(float, 1e-4, positive, "largest step (s)"),
+    "max_iterations": Field(int, 15, positive, "Newton iterations before a step is rejected"),
+    "impact_steps": Field(
+        float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
+    ),
+    "entry_fraction": Field(
+        float, 0.05, _in(0, 1, lo_open=True), "implicit: share of the activation gap an approaching pair may close per step"
+    ),
+    "safety": Field(float, 0.5, _in(0, 1, lo_open=True), "explicit: share of the critical step taken"),
+    "mass_damping": Field(float, 0.0, non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
+    "mass_scaling": Field(
+        float, 1.0, _at_least(1), "density factor for inertia, weight and contact scales (docs/dynamics.md)"
+    ),
+}
+
+OUTPUT = {
+    "every": Field(float, 1e-3, positive, "simulated time between written frames (s)"),
+    "vtk": Field(bool, True, doc="write the ParaView series grains.pvd"),
+}
+
+SETTLE = {
+    "kinetic_threshold": Field(
+        float, 1e-3, positive, "at rest when the mean kinetic energy per grain is below this share of m g d"
+    ),
+    "min_time": Field(float, 0.02, non_negative, "s before rest is checked"),
+    "max_time": Field(float, 1.0, positive, "s of simulated time at most (the run stops, unsettled, then)"),
+}
+
+# -------------------------------------------------------------------------------- scenario schemas
+SCENE = {
+    "scenario": Field(("scene",), REQUIRED),
+    "gravity": Field(list, [0.0, 0.0, -9.81], vector3, "m/s^2"),
+    "duration": Field(float, REQUIRED, positive, "simulated time (s)"),
+    "material": MATERIAL,
+    "vem": VEM,
+    "contact": CONTACT,
+    "solver": SOLVER,
+    "grains": TableList(SCENE_GRAIN, min_items=1),
+    "walls": TableList(WALL),
+    "output": OUTPUT,
+}
+
+GRAIN_COMPRESSION = {
+    "scenario": Field(("grain_compression",), REQUIRED),
+    "material": MATERIAL,
+    "vem": VEM,
+    "grain": GRAIN,
+    "loading": {
+        "mode": Field(("uniaxial", "confined"), "uniaxial"),
+        "max_strain": Field(float, 0.3, open_unit_interval, "engineering strain 1 - h/h0"),
+        "steps": Field(int, 30, positive, "load steps"),
+    },
+    "solver": {
+        "rtol": Field(float, 1e-9, positive, "Newton tolerance, relative"),
+        "max_iterations": Field(int, 40, positive),
+    },
+    "output": {
+        "vtk": Field(bool, True, doc="write the ParaView series grain.pvd"),
+        "plot": Field(bool, True, doc="write force_strain.png"),
+    },
+}
+
+# The paper's sand (section 3): E = 90 GPa, nu = 0.16, 2200 kg/m^3.
+PAPER_MATERIAL = with_defaults(MATERIAL, E=90e9, nu=0.16, density=2200.0)
+
+# Explicit with mass scaling: these runs follow grains for tenths of a second, where the stiff
+# grains' elastic periods (~1e-7 s) would otherwise set the step (docs/results.md, docs/dynamics.md).
+GRANULAR_SOLVER = with_defaults(SOLVER, integrator="explicit", mass_scaling=1e6, dt_max=1e-4)
+
+# Settling is preparation, not the experiment: a mass damping of 20 1/s caps the fall at about
+# g / 20 = 0.5 m/s, so grains from the top of a 100 mm column do not hit the pack at 1.4 m/s,
+# where the barrier stiffens and the explicit step fell to 6e-7 s (docs/results.md)
+SETTLING_DAMPING = 20.0
+
+
+def granular_tables(mu_s: float, mu_d: float, every: float) -> dict:
+    """The tables pack, pile_collapse and lid_compression share (the paper's material)."""
+    return {
+        "gravity": Field(list, [0.0, 0.0, -9.81], vector3, "m/s^2"),
+        "material": PAPER_MATERIAL,
+        "vem": VEM,
+        "contact": with_defaults(CONTACT, mu_s=mu_s, mu_d=mu_d),
+        "solver": GRANULAR_SOLVER,
+        "settle": SETTLE,
+        "output": with_defaults(OUTPUT, every=every),
+    }
+
+
+PACK = {
+    "scenario": Field(("pack",), REQUIRED),
+    "n_grains": Field(int, 515, positive, "number of grains"),
+    "seed": Field(int, 0, non_negative, "seeds the sizes, shapes, orientations and positions"),
+    "grains": {
+        "size": Field(float, 1.45e-3, positive, "mean equivalent diameter (m)"),
+        "size_spread": Field(float, 0.1, _in(0, 1, hi_open=True), "sizes uniform in size (1 +- size_spread)"),
+        "vertices": Field(int, 30, _at_least(8), "vertices per grain"),
+        "elongation": Field(float, 0.8, _in(0, 1, lo_open=True)),
+        "flatness": Field(float, 0.8, _in(0, 1, lo_open=True)),
+        "roughness": Field(float, 0.15, _in(0, 1, hi_open=True)),
+        "clearance": Field(float, 0.02, non_negative, "gap between grains in the column, in circumscribed radii"),
+    },
+    "box": {
+        "width": Field(float, 8e-3, positive, "x side (m)"),
+        "depth": Field(float, 8e-3, positive, "y side (m)"),
+    },
+    **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
+}
+PACK["solver"] = with_defaults(PACK["solver"], mass_damping=SETTLING_DAMPING)
+
+
+def pack_stage() -> dict:
+    """The `[pack]` table of pile_collapse and lid_compression: the pack scenario's own keys, used
+    when no `initial_state` is given (the pack is then settled first, into DIR/pack)."""
+    table = {k: PACK[k] for k in ("n_grains", "seed", "grains", "box")}
+    table["mu_s"] = Field(float, 0.6, non_negative, "friction while settling")
+    table["mu_d"] = Field(float, 0.5, non_negative, "friction while settling")
+    table["mass_damping"] = Field(float, SETTLING_DAMPING, non_negative, "1/s, mass damping while settling")
+    return table
+
+
+INITIAL_STATE = Field(str, "", doc="state.npz written by a pack run, relative to the config file [settle [pack] first]")
+
+PILE_COLLAPSE = {
+    "scenario": Field(("pile_collapse",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
+}
+PILE_COLLAPSE["settle"] = with_defaults(SETTLE, min_time=0.05)  # the pile must first start to move
+
+LID_COMPRESSION = {
+    "scenario": Field(("lid_compression",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "lid": {
+        "start": Field(float, 7e-3, positive, "lid height above the floor at the start and the end (m)"),
+        "end": Field(float, 4.9e-3, positive, "lowest lid height (m)"),
+        "speed": Field(float, 0.02, positive, "lid speed (m/s): slow against the grains' settling speed"),
+        "frames": Field(int, 100, positive, "frames (force samples) per phase"),
+    },
+    **granular_tables(mu_s=0.15, mu_d=0.15, every=1e-3),
+}
+LID_COMPRESSION["output"] = {"vtk": OUTPUT["vtk"]}  # frames come from lid.frames
+# A light normal damping: with the scenes' 0.5 the viscous force of the lid's stiff contacts
+# (2 zeta sqrt(k m), m mass-scaled) rivalled the elastic one at the lid's speed, and the force
+# fell from 15 kN to 0.4 kN and back when the lid turned; with 0.05 the curve is continuous there
+# (the paper-compression run, docs/results.md)
+LID_COMPRESSION["contact"] = with_defaults(LID_COMPRESSION["contact"], damping_ratio=0.05)
+
+
+# -------------------------------------------------------------------------------- cross-field rules
+def check_rules(cfg: dict) -> None:
+    """Rules that tie several keys together; each raises a ConfigError naming the key."""
+    contact = cfg.get("contact")
+    if isinstance(contact, dict) and contact.get("mu_d") is not None and contact["mu_d"] > contact["mu_s"]:
+        raise ConfigError(f"contact.mu_d: must not exceed contact.mu_s ({contact['mu_s']:g}), got {contact['mu_d']:g}")
+    pack = cfg.get("pack")
+    if isinstance(pack, dict) and "mu_d" in pack and pack["mu_d"] > pack["mu_s"]:
+        raise ConfigError(f"pack.mu_d: must not exceed pack.mu_s ({pack['mu_s']:g}), got {pack['mu_d']:g}")
+    solver = cfg.get("solver")
+    if isinstance(solver, dict) and "dt_min" in solver and "dt_max" in solver:
+        if solver["dt_min"] > solver["dt_max"]:
+            raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
+        if solver["dt"] < solver["dt_min"]:
+            raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    _check_frames(cfg)
+    lid = cfg.get("lid")
+    if isinstance(lid, dict) and lid["end"] >= lid["start"]:
+        raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
+
+
+def _check_frames(cfg: dict) -> None:
+    every = cfg.get("output", {}).get("every")
+    if every is None:
+        return
+    duration = cfg.get("duration") or cfg.get("settle", {}).get("max_time")
+    if duration is None:
+        return
+    frames = duration / every
+    if frames > MAX_FRAMES:
+        raise ConfigError(f"output.every: {every:g} s writes {frames:.3g} frames over {duration:g} s "
+                          f"(at most {MAX_FRAMES:,}); choose a larger interval")  # fmt: skip

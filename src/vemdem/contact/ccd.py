@@ -1,0 +1,120 @@
+"""Step bounds from contact (continuous collision detection): arrays in, numbers out.
+
+Integrators ask here how far a step or a Newton update may go before two surfaces could meet
+inside the activation layer unseen, and whether a step missed a pair. Nothing here knows a scene
+or a state (they live in model/ and solver/), so contact never points back up at them.
+
+- conservative advancement (formulation.md 4.5): surfaces with active pairs are at least their
+  smallest active gap apart, any other two at least the activation gap gbar; an update moving
+  surface s by at most d_s keeps every pair apart when alpha (d_a + d_b) < gap;
+- missed pairs: a pair found only by the end-of-step search and already inside gbar;
+- contact-impact step (formulation.md 5): an approaching pair closes at most a share f of gbar
+  inside the layer per step, an active one resolves half its oscillation pi sqrt(m_eq / k) in
+  N_impact steps;
+- explicit approach bounds: per-grain centre speed and spin radius, lowest vertex over a plane.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .law import normal_stiffness
+from .pairs import GAP, GRAIN_A, GRAIN_B, find_contacts
+
+
+def surface_displacements(dx: np.ndarray, vertex_ptr: np.ndarray, n_surfaces: int) -> np.ndarray:
+    """Largest vertex displacement of every grain, then 0 for each wall (walls move between steps)."""
+    step = np.linalg.norm(dx, axis=1)
+    grain_step = np.maximum.reduceat(step, vertex_ptr[:-1]) if len(step) else np.zeros(0)
+    return np.concatenate([grain_step, np.zeros(n_surfaces - len(grain_step))])
+
+
+def free_distance_ratio(disp: np.ndarray, ints: np.ndarray, floats: np.ndarray, gbar: float) -> float:
+    """Largest alpha such that moving every surface s by alpha disp[s] cannot bring two surfaces
+    into contact (conservative advancement, one global bound)."""
+    ratio = np.inf
+    if len(ints):
+        move = disp[ints[:, GRAIN_A]] + disp[ints[:, GRAIN_B]]
+        moving = move > 0
+        if moving.any():
+            ratio = float(np.min(floats[moving, GAP] / move[moving]))
+    top2 = np.sort(disp)[-2:].sum() if len(disp) > 1 else 0.0
+    if top2 > 0:
+        ratio = min(ratio, gbar / top2)
+    return ratio
+
+
+def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> int:
+    """Pairs that appear only in a search at the end of a step and are already inside the
+    activation gap: the step passed them by (formulation.md 4.5). `contact` is the ContactModel."""
+    fresh = contact.search(x, t)
+    if len(fresh) == 0:
+        return 0
+    width = int(max(fresh.max(), candidates.max() if len(candidates) else 0)) + 1
+    new = fresh[~np.isin(fresh[:, 0] * width + fresh[:, 1], candidates[:, 0] * width + candidates[:, 1])]
+    if len(new) == 0:
+        return 0
+    ints, _ = find_contacts(contact.all_positions(x, t), new, contact.topology, contact.law.activation_gap)
+    return len(ints)
+
+
+def impact_step_limit(gap: np.ndarray, rate: np.ndarray, m_eq: np.ndarray, law_params: np.ndarray, gbar: float,
+                      entry_fraction: float, impact_steps: float) -> float:  # fmt: skip
+    """Contact-impact step control (formulation.md 5) from the pairs' gaps, gap rates and masses:
+    - an approaching pair (rate -dg/dt) may close at most f gbar inside the layer in one step:
+      dt <= (max(g - gbar, 0) + f gbar) / (-dg/dt);
+    - an active pair resolves half its contact oscillation in N steps: dt <= pi sqrt(m_eq / k(g)) / N.
+    Without it a step may jump deep into the layer, where the trapezoidal rule's energy error at a
+    stiff nonlinear spring is largest (docs/dynamics.md)."""
+    limit = np.inf
+    closing = rate < 0
+    if closing.any():
+        depth = np.maximum(gap[closing] - gbar, 0.0) + entry_fraction * gbar
+        limit = float(np.min(depth / -rate[closing]))
+    k = normal_stiffness(np.ascontiguousarray(gap), law_params)
+    loaded = k > 0
+    if loaded.any():
+        limit = min(limit, np.pi * np.sqrt(np.min(m_eq[loaded] / k[loaded])) / impact_steps)
+    return limit
+
+
+@njit(cache=True)
+def grain_speeds(v, mass, vptr):
+    """Mass-weighted centre velocity c of each grain and r, its vertices' largest speed about c."""
+    G = len(vptr) - 1
+    c = np.zeros((G, 3))
+    r = np.zeros(G)
+    for g in range(G):
+        m = 0.0
+        for i in range(vptr[g], vptr[g + 1]):
+            m += mass[i]
+            for a in range(3):
+                c[g, a] += mass[i] * v[i, a]
+        for a in range(3):
+            c[g, a] /= m
+        for i in range(vptr[g], vptr[g + 1]):
+            s = (v[i, 0] - c[g, 0]) ** 2 + (v[i, 1] - c[g, 1]) ** 2 + (v[i, 2] - c[g, 2]) ** 2
+            r[g] = max(r[g], np.sqrt(s))
+    return c, r
+
+
+@njit(cache=True)
+def plane_distances(x, vptr, point, normal):
+    """Signed distance of each grain's lowest vertex over the plane (point, normal)."""
+    G = len(vptr) - 1
+    out = np.full(G, np.inf)
+    for g in range(G):
+        for i in range(vptr[g], vptr[g + 1]):
+            d = (x[i, 0] - point[0]) * normal[0] + (x[i, 1] - point[1]) * normal[1] + (x[i, 2] - point[2]) * normal[2]
+            out[g] = min(out[g], d)
+    return out
+
+
+def closing_time(d, speed, gbar, f) -> float:
+    """Smallest (max(d - gbar, 0) + f min(d, gbar)) / speed over pairs that approach."""
+    moving = speed > 0
+    if not moving.any():
+        return np.inf
+    d, speed = d[moving], speed[moving]
+    return float(np.min((np.maximum(d - gbar, 0.0) + f * np.minimum(d, gbar)) / speed))

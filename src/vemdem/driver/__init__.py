@@ -1,0 +1,1 @@
+"""The shared time loop of every dynamic scenario: frames, checkpoints, stop and control hooks."""

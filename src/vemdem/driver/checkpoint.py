@@ -1,0 +1,62 @@
+"""Checkpoints: the whole integrator state after a frame, written atomically, so that
+`vemdem run ... --resume` continues to the same result, bit for bit."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..contact.model import ContactHistory
+from ..solver.state import RunStats, State, StepControl
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, unreadable or belongs to another config; str(e) names the file."""
+
+
+def config_fingerprint(cfg: dict) -> str:
+    return hashlib.sha256(json.dumps(cfg, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int, fingerprint: str):
+    tmp = path.with_suffix(".tmp.npz")
+    h = state.history
+    np.savez(tmp, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated, power=state.power,
+             keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
+             accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
+             krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint)  # fmt: skip
+    tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
+
+
+def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
+    """(state, stats, frame) from a checkpoint; control.dt and easy_streak are restored in place."""
+    if not path.is_file():
+        raise CheckpointError(f"--resume: no checkpoint at {path}")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            if str(d["fingerprint"]) != fingerprint:
+                raise CheckpointError(f"--resume: {path} was written by a different config")
+            history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
+            state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]))
+            control.dt = float(d["dt"])
+            control.easy_streak = int(d["easy_streak"])
+            krylov = int(d["krylov"]) if "krylov" in d.files else 0
+            stats = RunStats(int(d["accepted"]), int(d["rejected"]), int(d["newton"]), krylov)
+            frame = int(d["frame"])
+    except CheckpointError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
+                              "remove it and run again without --resume") from None  # fmt: skip
+    return state, stats, frame
+
+
+def truncate_csv(path: Path, t_max: float):
+    """Keep the header and the rows written up to the checkpoint (a resumed run rewrites the rest)."""
+    lines = path.read_text().splitlines(keepends=True)
+    keep = [lines[0]] + [ln for ln in lines[1:] if float(ln.split(",")[0]) <= t_max]
+    path.write_text("".join(keep))

@@ -1,0 +1,71 @@
+"""Frames of a run: history.csv (energies), grains.csv (centroids), walls.csv (wall forces) and
+the ParaView series grains.pvd (surfaces, velocity, projected stress, contact points and forces)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..contact.forces import contact_points
+from ..io.results import CsvLog
+from ..io.vtk import PvdSeries
+from ..model.scene import Scene
+from ..solver.state import State
+
+HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts"]
+GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
+WALLS_HEADER = ["time", "wall", "name", "fx", "fy", "fz"]  # force of the grains on each wall (N)
+FRAME_CSVS = ("history.csv", "grains.csv", "walls.csv")
+
+
+class FrameWriter:
+    def __init__(self, scene: Scene, out_dir: Path, vtk: bool, resume_frames: int | None, lumped: bool = False):
+        self.scene = scene
+        self.lumped = lumped  # the explicit integrator's energies use its lumped mass
+        self.out_dir = out_dir
+        mode = "a" if resume_frames is not None else "w"
+        self.history = CsvLog(out_dir / "history.csv", HISTORY_HEADER, mode)
+        self.grains = CsvLog(out_dir / "grains.csv", GRAINS_HEADER, mode)
+        self.walls = CsvLog(out_dir / "walls.csv", WALLS_HEADER, mode)
+        self.wall_names = [m.name for m in scene.contact.meshes] + [p.name for p in scene.contact.planes]
+        self.vtk = PvdSeries(out_dir, "grains", keep=resume_frames) if vtk else None
+        n_grain_faces = scene.contact.topology.grain_face_ptr[scene.n_grains]
+        self.faces = scene.contact.topology.faces[:n_grain_faces]
+        self.face_grain = scene.contact.topology.face_grain[:n_grain_faces]
+
+    def write(self, state: State, strain: float, contact_result):
+        s = self.scene
+        self.history.write(state.t, s.kinetic_energy(state.v, self.lumped), strain, s.gravity_energy(state.x, self.lumped),
+                           contact_result.energy, state.dissipated, contact_result.n_contacts)  # fmt: skip
+        c = s.grain_centroids(state.x)
+        vc = s.grain_centroids(state.v)
+        self.grains.write_rows([[state.t, g, *c[g], *vc[g]] for g in range(s.n_grains)])
+        self.walls.write_rows([[state.t, w, name, *contact_result.wall_reactions[w]]
+                               for w, name in enumerate(self.wall_names)])  # fmt: skip
+        if self.vtk is not None:
+            self._write_vtk(state, contact_result)
+
+    def _write_vtk(self, state, cr):
+        s = self.scene
+        x_all = s.contact.all_positions(state.x, state.t)
+        points = contact_points(x_all, cr.ints, cr.floats) if cr.n_contacts else np.zeros((0, 3))
+        n, m = s.n_vertices, len(points)
+        sigma = s.bodies.cauchy_stress(state.x).reshape(-1, 9)
+        cells_pt = (n + np.arange(m)).reshape(-1, 1)
+        force = np.vstack([np.zeros((n, 3)), cr.pair_force]) if m else np.zeros((n, 3))
+        self.vtk.write(
+            state.t,
+            np.vstack([state.x, points]),
+            [("triangle", self.faces), ("vertex", cells_pt)],
+            point_data={"velocity": np.vstack([state.v, np.zeros((m, 3))]), "contact_force": force},
+            cell_data={
+                "grain": [self.face_grain, np.full(m, -1)],
+                "cauchy_stress": [sigma[self.face_grain], np.zeros((m, 9))],
+            },
+        )
+
+    def close(self):
+        self.history.close()
+        self.grains.close()
+        self.walls.close()

@@ -1,0 +1,103 @@
+"""The time loop every dynamic scenario shares.
+
+    simulate(scene, integrator, out_dir, duration=, every=, ...) -> Run
+
+A frame (history.csv, grains.csv, walls.csv, ParaView) every `every` s up to `duration`, a
+checkpoint after each frame; after each frame `stop(state)` may end the run early (deterministic:
+a resumed run stops at the same frame); after every accepted step `control(state, info)` may act
+on the scene (e.g. move a servo wall from the reactions in `info.wall_reactions`), which is how
+stress-controlled tests drive their walls. Scenarios are short recipes over this loop.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..contact.model import PenetrationError
+from ..model.scene import Scene
+from ..solver.api import Integrator
+from ..solver.state import RunStats, State
+from .checkpoint import load_checkpoint, save_checkpoint, truncate_csv
+from .frames import FRAME_CSVS, FrameWriter
+
+
+class InitialStateError(ValueError):
+    """The initial state is not admissible (a grain behind a wall): str(e) names the cause."""
+
+
+@dataclass
+class Run:
+    """What the shared time loop hands back to a scenario."""
+
+    state: State
+    stats: RunStats
+    stopped_early: bool  # `stop` ended the run before `duration`
+    last_contact: object  # the ContactResult at the last frame
+    integrator: Integrator
+    wall_seconds: float = 0.0
+
+
+def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
+             fingerprint: str, x0=None, v0=None, resume: bool = False, progress=None, stop=None,
+             control=None) -> Run:  # fmt: skip
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    steps = integrator.control
+    ckpt = out_dir / "checkpoint.npz"
+    n_frames = _n_frames(duration, every)
+    if resume:
+        state, stats, frame = load_checkpoint(ckpt, steps, fingerprint)
+        for name in FRAME_CSVS:
+            truncate_csv(out_dir / name, state.t)
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
+        last_contact = contact_now(scene, state)
+    else:
+        try:
+            state = integrator.initial_state(x0=x0, v0=v0)
+        except PenetrationError as exc:
+            raise InitialStateError(f"walls: a grain starts behind a wall ({exc})") from None
+        stats, frame = RunStats(), 0
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
+        last_contact = contact_now(scene, state)
+        writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact)
+        save_checkpoint(ckpt, state, steps, stats, frame, fingerprint)
+    last = {}
+
+    def on_step(st, info, h):
+        last["info"] = info
+        if control is not None:
+            control(st, info)
+
+    stopped = stop is not None and frame > 0 and stop(state)
+    try:
+        while frame < n_frames and not stopped:
+            t_next = min((frame + 1) * every, duration)
+            t_wall = time.perf_counter()
+            steps_before = stats.accepted
+            state, stats = integrator.advance(state, t_next, on_step, stats)
+            frame += 1
+            last_contact = last["info"].contact
+            writer.write(state, last["info"].strain_energy, last_contact)
+            save_checkpoint(ckpt, state, steps, stats, frame, fingerprint)
+            if progress:
+                rate = (stats.accepted - steps_before) / max(time.perf_counter() - t_wall, 1e-9)
+                progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, dt = {steps.dt:.2e} s")
+            stopped = stop is not None and stop(state)
+    finally:
+        writer.close()
+    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start)
+
+
+def _n_frames(duration: float, every: float) -> int:
+    return int(np.ceil(duration / every - 1e-9))
+
+
+def contact_now(scene: Scene, state: State):
+    """The contact state at a frame (for the energies, the reactions and the ParaView points)."""
+    cand = scene.contact.search(state.x, state.t)
+    return scene.contact.evaluate(state.x, state.t, cand, state.history, v=state.v)

@@ -1,0 +1,137 @@
+"""The body-model seam: what integrators, the time loop and the measures know of the grains.
+
+Integrators never call the VEM kernels: they see a `BodyModel`, whose coordinates q they step,
+whose `positions(q)` the contact code sees, and whose `evaluate` returns internal forces and the
+dense tangent block of every body (the linear solvers' grain blocks). Contact works on vertex
+positions only, so a body model is free in its choice of coordinates:
+
+- `VemBodies` (flexible grains, the paper's model): q = the vertex positions x (N, 3), one
+  virtual element per grain (vem/), consistent or lumped mass (vem/mass.py); `positions` and
+  `pullback` are identities.
+- a rigid model (next) maps 6 dofs per grain to its vertices, x = R X + c, and pulls vertex forces
+  back with J^T.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..geometry.polyhedron import Polyhedron
+from ..vem.element import (
+    Evaluation,
+    GrainElements,
+    InvertedElementError,
+    VemOptions,
+    build_elements,
+    evaluate,
+    projected_cauchy_stress,
+    tangent_matrix,
+)
+from ..vem.mass import GrainMass, add_mass_to_blocks, build_mass
+from ..vem.material import Material
+
+__all__ = ["BodyModel", "Evaluation", "InvertedElementError", "VemBodies", "equivalent_diameters"]
+
+
+def equivalent_diameters(volume: np.ndarray) -> np.ndarray:
+    """Diameter of the sphere of each grain's volume: THE grain size of vemdem (contact scales,
+    rest criterion, angle of repose)."""
+    return np.cbrt(6.0 * np.asarray(volume, float) / np.pi)
+
+
+class BodyModel(Protocol):
+    """The mechanics of the grains as integrators see it (flat arrays; no per-grain objects)."""
+
+    kind: str  # "flexible" or "rigid": recorded in every summary
+    vertex_ptr: np.ndarray  # (G+1,) vertices of body g on the contact surface
+    reference: np.ndarray  # (N, 3) vertex positions at q0
+    volume: np.ndarray  # (G,)
+    lumped: np.ndarray  # (N,) vertex masses (kinetic energy, centroids, explicit steps)
+    load: np.ndarray  # (N,) gravity weights: f_g[v] = load[v] g
+    block_ptr: np.ndarray  # (G+1,) offsets of each body's flat dense tangent block
+    dof_ptr: np.ndarray  # (G+1,) dofs of body g
+
+    @property
+    def n_bodies(self) -> int: ...
+
+    @property
+    def n_vertices(self) -> int: ...
+
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False) -> Evaluation: ...
+
+    def add_mass(self, blocks: np.ndarray, shift: float) -> None: ...
+
+    def mass_matrix(self) -> sp.csr_matrix: ...
+
+    def critical_steps(self) -> np.ndarray: ...
+
+
+class VemBodies:
+    """Flexible grains: one linear virtual element per grain (paper eq. 8), q = vertex positions."""
+
+    kind = "flexible"
+
+    def __init__(self, grains: list[Polyhedron], material: Material, options: VemOptions = VemOptions()):
+        self.elements: GrainElements = build_elements(list(grains), material, options)
+        self.mass: GrainMass = build_mass(list(grains), self.elements, material.density)
+        el = self.elements
+        self.vertex_ptr = el.vertex_ptr
+        self.reference = el.reference
+        self.volume = el.volume
+        self.lumped = self.mass.lumped
+        self.load = self.mass.load
+        self.block_ptr = el.block_ptr
+        self.dof_ptr = 3 * el.vertex_ptr
+        self.body_mass = material.density * el.volume
+        self._mass_matrix = None
+
+    @property
+    def n_bodies(self) -> int:
+        return self.elements.n_grains
+
+    @property
+    def n_vertices(self) -> int:
+        return self.elements.n_vertices
+
+    # ------------------------------------------------------------------ mechanics
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False) -> Evaluation:
+        """Strain energy per grain, internal force dW/dx and the flat dense tangent blocks."""
+        return evaluate(self.elements, x, force=force, tangent=tangent)
+
+    def add_mass(self, blocks: np.ndarray, shift: float) -> None:
+        """blocks += shift M (M the consistent mass, scalar n x n per grain times I_3), in place:
+        the Newmark matrix a1 M + K_int without a sparse sum."""
+        add_mass_to_blocks(blocks, self.elements.block_ptr, self.mass.blocks, self.mass.block_ptr,
+                           self.vertex_ptr, shift)  # fmt: skip
+
+    def tangent_matrix(self, blocks: np.ndarray) -> sp.csr_matrix:
+        return tangent_matrix(self.elements, blocks)
+
+    def mass_matrix(self) -> sp.csr_matrix:
+        if self._mass_matrix is None:
+            self._mass_matrix = self.mass.matrix()
+        return self._mass_matrix
+
+    def critical_steps(self) -> np.ndarray:
+        """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the
+        tangent block of the grain, m its lumped vertex masses). Grains with the same number of
+        vertices are solved as one batch."""
+        el = self.elements
+        blocks = evaluate(el, el.reference, force=False, tangent=True).blocks
+        counts = np.diff(el.vertex_ptr)
+        out = np.empty(self.n_bodies)
+        for n in np.unique(counts):
+            grains = np.flatnonzero(counts == n)
+            K = np.stack([blocks[el.block_ptr[g] : el.block_ptr[g + 1]] for g in grains]).reshape(-1, 3 * n, 3 * n)
+            m = np.stack([np.repeat(self.lumped[el.vertex_ptr[g] : el.vertex_ptr[g + 1]], 3) for g in grains])
+            s = 1.0 / np.sqrt(m)
+            lam = np.linalg.eigvalsh(s[:, :, None] * K * s[:, None, :])[:, -1]
+            out[grains] = 2.0 / np.sqrt(lam)
+        return out
+
+    def cauchy_stress(self, x: np.ndarray) -> np.ndarray:
+        """(G, 3, 3) Cauchy stress of each grain's projected deformation (frames)."""
+        return projected_cauchy_stress(self.elements, x)

@@ -1,0 +1,87 @@
+"""A scene: bodies placed in the world, their contact and gravity.
+
+Data flows one way: config -> Scene -> integrator steps (body forces + contact forces) ->
+writers and analysis. The reference configuration of every grain is its initial placement
+(total Lagrangian); all grains share flat arrays (`BodyModel`, `ContactModel`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..contact.friction import FrictionLaw
+from ..contact.law import InterfaceLaw
+from ..contact.model import ContactModel
+from ..geometry.polyhedron import Polyhedron
+from ..vem.element import VemOptions
+from ..vem.material import Material
+from .bodies import BodyModel, VemBodies, equivalent_diameters
+
+
+@dataclass
+class Scene:
+    grains: list[Polyhedron]  # reference shapes (state files, outputs)
+    material: Material  # density already multiplied by mass_scaling
+    bodies: BodyModel
+    contact: ContactModel
+    gravity: np.ndarray
+    mass_scaling: float = 1.0  # density factor applied to the material (recorded in every summary)
+
+    @classmethod
+    def build(cls, grains, material: Material, law: InterfaceLaw, friction: FrictionLaw = FrictionLaw(),
+              planes=(), meshes=(), gravity=(0.0, 0.0, -9.81), vem: VemOptions = VemOptions(),
+              mass_scaling: float = 1.0) -> "Scene":  # fmt: skip
+        bodies = VemBodies(list(grains), material, vem)
+        contact = ContactModel(bodies.reference, [g.faces for g in grains], bodies.vertex_ptr, bodies.body_mass, law,
+                               friction, planes=planes, meshes=meshes)  # fmt: skip
+        return cls(list(grains), material, bodies, contact, np.asarray(gravity, float), float(mass_scaling))
+
+    @property
+    def n_vertices(self) -> int:
+        return self.bodies.n_vertices
+
+    @property
+    def n_grains(self) -> int:
+        return self.bodies.n_bodies
+
+    @property
+    def grain_sizes(self) -> np.ndarray:
+        """Equivalent diameter of every grain (model.bodies.equivalent_diameters)."""
+        return equivalent_diameters(self.bodies.volume)
+
+    @property
+    def grain_size(self) -> float:
+        """Mean equivalent diameter."""
+        return float(np.mean(self.grain_sizes))
+
+    def mass_matrix(self) -> sp.csr_matrix:
+        return self.bodies.mass_matrix()
+
+    def gravity_force(self) -> np.ndarray:
+        """Nodal gravity load (N, 3) of the blended element (beta_e)."""
+        return self.bodies.load[:, None] * self.gravity[None, :]
+
+    def kinetic_energy(self, v: np.ndarray, lumped: bool = False) -> float:
+        """1/2 v.M v with the consistent mass, or the lumped one (the explicit integrator's)."""
+        if lumped:
+            return 0.5 * float(np.sum(self.bodies.lumped[:, None] * v * v))
+        vf = v.ravel()
+        return 0.5 * float(vf @ (self.mass_matrix() @ vf))
+
+    def gravity_energy(self, x: np.ndarray, lumped: bool = False) -> float:
+        """Potential of gravity measured from the origin (z = 0 for vertical gravity), with the
+        element's load vector or the lumped masses (the explicit integrator's)."""
+        weights = self.bodies.lumped if lumped else self.bodies.load
+        return -float(np.sum(weights[:, None] * self.gravity[None, :] * x))
+
+    def grain_centroids(self, x: np.ndarray) -> np.ndarray:
+        """Mass-weighted centre of each grain (lumped weights: exact for the centre of mass)."""
+        w = self.bodies.lumped[:, None]
+        ptr = self.bodies.vertex_ptr[:-1]
+        return np.add.reduceat(w * x, ptr, axis=0) / np.add.reduceat(self.bodies.lumped, ptr)[:, None]
+
+    def total_mass(self) -> float:
+        return float(self.bodies.lumped.sum())

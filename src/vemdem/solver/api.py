@@ -1,0 +1,104 @@
+"""THE place where the integrator is chosen: typed solver options -> an `Integrator`.
+
+Every integrator offers the same small interface to the time loop (driver/loop.py): an initial
+state, `advance` to a time, its step control (checkpointed), and the energies measured the way it
+integrates them (the explicit integrator's lumped mass, the implicit one's consistent mass).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..model.scene import Scene
+from .explicit import ExplicitIntegrator, ExplicitParameters, advance_explicit, explicit_initial_state
+from .newmark import NewmarkParameters, advance, initial_state
+from .state import RunStats, State, StepControl
+
+INTEGRATORS = ("implicit", "explicit")
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """The `[solver]` table, checked and typed (config/build.py makes it)."""
+
+    integrator: str = "implicit"
+    beta: float = 0.3
+    gamma: float = 0.5
+    dt: float = 1e-5
+    dt_min: float = 1e-10
+    dt_max: float = 1e-4
+    max_iterations: int = 15
+    impact_steps: float = 0.0
+    entry_fraction: float = 0.05
+    safety: float = 0.5
+    mass_damping: float = 0.0
+
+    def __post_init__(self):
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
+
+
+class Integrator(Protocol):
+    name: str
+    lumped: bool  # energies with the lumped mass (the explicit integrator's own)
+    control: StepControl
+
+    def initial_state(self, x0=None, v0=None) -> State: ...
+
+    def advance(self, state: State, t_end: float, on_step, stats: RunStats) -> tuple[State, RunStats]: ...
+
+
+class ImplicitNewmark:
+    """Newmark + Newton on elements and contact (solver/newmark.py)."""
+
+    name = "implicit"
+    lumped = False
+
+    def __init__(self, scene: Scene, options: SolverOptions):
+        self.scene = scene
+        self.control = _control(options)
+        self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
+                                        mass_damping=options.mass_damping)  # fmt: skip
+
+    def initial_state(self, x0=None, v0=None) -> State:
+        return initial_state(self.scene, x0=x0, v0=v0)
+
+    def advance(self, state, t_end, on_step, stats):
+        return advance(self.scene, state, t_end, self.control, self.params, on_step, stats)
+
+
+class ExplicitCentral:
+    """Explicit central differences with lumped mass (solver/explicit.py)."""
+
+    name = "explicit"
+    lumped = True
+
+    def __init__(self, scene: Scene, options: SolverOptions):
+        self.scene = scene
+        self.control = _control(options)
+        self.integrator = ExplicitIntegrator(scene, ExplicitParameters(safety=options.safety,
+                                                                       mass_damping=options.mass_damping))  # fmt: skip
+
+    def initial_state(self, x0=None, v0=None) -> State:
+        return explicit_initial_state(self.scene, self.integrator, x0=x0, v0=v0)
+
+    def advance(self, state, t_end, on_step, stats):
+        return advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
+
+
+def _control(o: SolverOptions) -> StepControl:
+    return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
+                       entry_fraction=o.entry_fraction)  # fmt: skip
+
+
+def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
+    if options.integrator == "explicit":
+        return ExplicitCentral(scene, options)
+    return ImplicitNewmark(scene, options)
+
+
+def kinetic_energy(scene: Scene, integrator: Integrator, v: np.ndarray) -> float:
+    return scene.kinetic_energy(v, integrator.lumped)

@@ -1,0 +1,76 @@
+"""What an integrator carries from step to step, and what it reports.
+
+`State` is the whole dynamic state of a run (a checkpoint writes exactly these arrays, so a resumed
+run continues bit for bit); `StepControl` the adaptive step (formulation.md 5: halve on rejection,
+grow after easy steps); `RunStats` the counters every summary reports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..contact.model import ContactHistory
+
+
+class StepRejected(RuntimeError):
+    """This step cannot be accepted; the caller restores the state and halves the step."""
+
+
+class TimeStepTooSmall(RuntimeError):
+    """The step fell below dt_min: the run stops with the cause of the last rejection."""
+
+
+@dataclass
+class State:
+    t: float
+    x: np.ndarray  # body coordinates (flexible grains: vertex positions, (N, 3))
+    v: np.ndarray
+    a: np.ndarray
+    history: ContactHistory = field(default_factory=ContactHistory.empty)
+    dissipated: float = 0.0
+    power: float = 0.0
+
+    def copy(self) -> "State":
+        return replace(self, x=self.x.copy(), v=self.v.copy(), a=self.a.copy())
+
+
+@dataclass
+class StepInfo:
+    iterations: int
+    n_contacts: int
+    contact_energy: float
+    strain_energy: float
+    wall_reactions: np.ndarray
+    ints: np.ndarray
+    floats: np.ndarray
+    contact: object = None  # the ContactResult at the accepted state (frames write it)
+    krylov_iterations: int = 0  # linear-solver iterations of the step (iterative solvers)
+
+
+@dataclass
+class StepControl:
+    """Adaptive step (formulation.md 5): halve on rejection, grow after easy steps."""
+
+    dt: float = 1e-5
+    dt_min: float = 1e-10
+    dt_max: float = 1e-4
+    grow: float = 1.5
+    # a step is "easy" when Newton converged in at most this many iterations: settling packs need
+    # 5-8 on the barrier law, so a smaller bound never let the step grow back after a rejection
+    # (measured with benchmarks/bench_dynamics.py, docs/dynamics.md)
+    easy_iterations: int = 8
+    grow_after: int = 3
+    easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
+    impact_steps: float = 0.0  # > 0: contact-impact step control on (formulation.md 5, contact.ccd)
+    entry_fraction: float = 0.05  # implicit: share of the activation gap an approaching pair may close per step
+
+
+@dataclass
+class RunStats:
+    accepted: int = 0
+    rejected: int = 0
+    newton_iterations: int = 0
+    krylov_iterations: int = 0
+    last_rejection: str = ""

@@ -1,0 +1,1 @@
+"""Runs on purpose, to check vemdem against independent references (a refined FEM model)."""
