@@ -87,6 +87,43 @@ def local_tangent_matrix(ints, local_tangent, n_vertices: int) -> sp.csr_matrix:
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 
+@njit(cache=True)
+def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_ptr, n_vertices, blocks,
+                          rows, cols, vals):  # fmt: skip
+    """Add the pairs' local tangents to the grains' dense blocks (both nodes on one grain) and
+    return the count of coupling entries (nodes on two grains) written to rows, cols, vals, which
+    must hold 9 * 36 entries per pair. Wall nodes (index >= n_vertices) are prescribed: dropped.
+    Serial: pairs share grains."""
+    m = 0
+    for c in range(len(ints)):
+        nn = N_NODES[ints[c, KIND]]
+        for i in range(nn):
+            vi = ints[c, NODE0 + i]
+            if vi >= n_vertices:
+                continue
+            gi = vertex_grain[vi]
+            for j in range(nn):
+                vj = ints[c, NODE0 + j]
+                if vj >= n_vertices:
+                    continue
+                gj = vertex_grain[vj]
+                if gi == gj:
+                    n3 = 3 * (vertex_ptr[gi + 1] - vertex_ptr[gi])
+                    li, lj = 3 * (vi - vertex_ptr[gi]), 3 * (vj - vertex_ptr[gi])
+                    b0 = block_ptr[gi]
+                    for a in range(3):
+                        for b in range(3):
+                            blocks[b0 + (li + a) * n3 + lj + b] += local_tangent[c, 3 * i + a, 3 * j + b]
+                else:
+                    for a in range(3):
+                        for b in range(3):
+                            rows[m] = 3 * vi + a
+                            cols[m] = 3 * vj + b
+                            vals[m] = local_tangent[c, 3 * i + a, 3 * j + b]
+                            m += 1
+    return m
+
+
 def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: bool = False) -> ContactEvaluation:
     m = len(ints)
     energy = np.zeros(m)

@@ -20,7 +20,14 @@ import scipy.sparse as sp
 from numba import njit
 
 from .broad import candidate_pairs, grain_boxes
-from .forces import evaluate_contacts, force_on_side_a, gap_rates, local_tangent_matrix, scatter_local_forces
+from .forces import (
+    evaluate_contacts,
+    force_on_side_a,
+    gap_rates,
+    local_tangent_matrix,
+    scatter_local_forces,
+    scatter_pair_tangents,
+)
 from .friction import FrictionLaw, dissipative_forces, dissipative_terms
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE
@@ -78,7 +85,7 @@ def _plane_candidates(x, n_vertices, point, normal, gbar, flags, signed):
 class ContactResult:
     energy: float
     force: np.ndarray  # (N, 3) dPhi/dx on grain vertices (+ dissipative terms): minus the contact force
-    tangent: sp.csr_matrix | None
+    pair_tangent: np.ndarray | None  # (m, 18, 18) d(force)/dx of each pair at its nodes (normal + dissipative)
     ints: np.ndarray
     floats: np.ndarray
     wall_reactions: np.ndarray  # (n_walls, 3) force of the grains on each wall
@@ -89,6 +96,29 @@ class ContactResult:
     @property
     def n_contacts(self) -> int:
         return len(self.ints)
+
+    @property
+    def tangent(self) -> sp.csr_matrix | None:
+        """The contact tangent on the grains' vertex dofs (3N square; wall nodes are prescribed)."""
+        if self.pair_tangent is None:
+            return None
+        n = len(self.force)
+        all_nodes = int(self.ints[:, NODE0:].max()) + 1 if len(self.ints) else n
+        K = local_tangent_matrix(self.ints, self.pair_tangent, max(all_nodes, n))
+        return K[: 3 * n, : 3 * n].tocsr()
+
+    def add_to_blocks(self, vertex_grain, vertex_ptr, block_ptr, blocks) -> sp.csr_matrix:
+        """Add the contact tangent's within-grain terms to the grains' dense blocks (in place) and
+        return the grain-to-grain coupling as one CSR matrix: no sparse sum in Newton."""
+        n = len(self.force)
+        size = 324 * len(self.ints)
+        rows, cols, vals = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size)
+        if len(self.ints):
+            m = scatter_pair_tangents(self.ints, self.pair_tangent, vertex_grain, vertex_ptr, block_ptr, n, blocks,
+                                      rows, cols, vals)  # fmt: skip
+        else:
+            m = 0
+        return sp.csr_matrix((vals[:m], (rows[:m], cols[:m])), shape=(3 * n, 3 * n))
 
 
 class ContactModel:
@@ -214,7 +244,7 @@ class ContactModel:
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
         residual = conservative.force
-        K = conservative.tangent_matrix(n_all) if tangent else None
+        pair_tangent = conservative.local_tangent if tangent else None
         keys = pair_keys(ints)
         history = history or ContactHistory.empty()
         found, c_prev, gt_prev, stick_prev = history.lookup(keys)
@@ -236,14 +266,13 @@ class ContactModel:
             power = float(np.sum(extra * v_all))
             pair_force = pair_force + force_on_side_a(ints, local_force)
             if tangent:
-                K = K + local_tangent_matrix(ints, local_tangent, n_all)
+                pair_tangent = pair_tangent + local_tangent
         reactions = self._wall_reactions(residual)
         N = self.n_vertices
-        K_grains = K[: 3 * N, : 3 * N].tocsr() if tangent else None
         trial = ContactHistory(keys, floats[:, :2].copy(), gt_now, stick_now)
         order = np.argsort(keys, kind="stable")
         trial = ContactHistory(keys[order], trial.c_prev[order], trial.gt[order], trial.stick[order])
-        return ContactResult(conservative.total_energy, residual[:N], K_grains, ints, floats, reactions, trial, power,
+        return ContactResult(conservative.total_energy, residual[:N], pair_tangent, ints, floats, reactions, trial, power,
                              pair_force)  # fmt: skip
 
     def max_wall_speed(self, t: float) -> float:

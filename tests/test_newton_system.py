@@ -1,0 +1,52 @@
+"""The Newton matrix assembled straight into grain blocks + one coupling matrix (issue 14) is the
+matrix a1 M + K_int + K_contact assembled the long way (sparse sums of the global matrices)."""
+
+import numpy as np
+
+from vemdem.contact.defaults import default_contact_laws
+from vemdem.contact.walls import box_walls
+from vemdem.geometry import cube, rotation_matrix
+from vemdem.model.scene import Scene
+from vemdem.solver.newmark import newton_blocks
+from vemdem.vem.material import Material
+
+MAT = Material(90e9, 0.16, 2200.0)
+
+
+def touching_scene():
+    """Three cubes stacked on a floor, the middle one turned about z (its edges cross the others':
+    vertex-face and edge-edge pairs), each half an activation gap above the one below, with
+    friction and normal damping active."""
+    size = 1e-3
+    law, friction = default_contact_laws(size, MAT.E, MAT.density, mu_s=0.6, mu_d=0.5)
+    grains, z = [], 0.5 * law.activation_gap
+    for k, angle in enumerate((0.0, 0.5, 0.1)):
+        g = cube(size * (1.0 - 0.1 * k))
+        g = g.translated(-g.centroid).rotated(rotation_matrix([0.0, 0.0, angle]))
+        g = g.translated((0.0, 0.0, z - g.vertices[:, 2].min()))
+        grains.append(g)
+        z = g.vertices[:, 2].max() + 0.5 * law.activation_gap
+    return Scene.build(grains, MAT, law, friction, planes=box_walls(4e-3, 4e-3))
+
+
+def test_blocks_plus_coupling_equal_the_sparse_sum():
+    scene = touching_scene()
+    rng = np.random.default_rng(0)
+    gbar = scene.contact.law.activation_gap
+    # squeeze the stack a little and give every vertex a velocity, so that damping and friction act
+    x = scene.bodies.reference * np.array([1.0, 1.0, 1.0 - 0.1 * gbar / 3e-3])
+    v = rng.normal(scale=1e-3, size=x.shape)
+    cand = scene.contact.search(x, 0.0)
+    cr = scene.contact.evaluate(x, 0.0, cand, v=v, a4=2e3, tangent=True)
+    assert (cr.ints[:, 1] < scene.n_grains).any() and cr.n_contacts > 6  # grain-grain pairs among them
+    el = scene.bodies.evaluate(x, tangent=True)
+    shift = 1.7e7
+    reference = shift * scene.mass_matrix() + scene.bodies.tangent_matrix(el.blocks.copy()) + cr.tangent
+    blocks, coupling = newton_blocks(scene, el, cr, shift)
+    assembled = scene.bodies.tangent_matrix(blocks) + coupling
+    scale = abs(reference).max()
+    assert abs(assembled - reference).max() <= 1e-13 * scale
+    # the coupling holds only entries between different grains
+    rows, cols = coupling.nonzero()
+    grain_of_dof = np.repeat(scene.contact.topology.vertex_grain[: scene.n_vertices], 3)
+    assert len(rows) > 0 and np.all(grain_of_dof[rows] != grain_of_dof[cols])
