@@ -45,6 +45,47 @@ def free_distance_ratio(disp: np.ndarray, ints: np.ndarray, floats: np.ndarray, 
     return ratio
 
 
+@njit(cache=True)
+def _pair_ratio(pairs, disp, ints, floats, gbar):
+    """min over candidate surface pairs (a, b) of D_ab / (d_a + d_b): D_ab the smallest active gap
+    of the pair, or gbar when none of its features is within the layer."""
+    ratio = np.inf
+    for k in range(len(pairs)):
+        move = disp[pairs[k, 0]] + disp[pairs[k, 1]]
+        if move > 0.0:
+            ratio = min(ratio, gbar / move)
+    for c in range(len(ints)):
+        move = disp[ints[c, GRAIN_A]] + disp[ints[c, GRAIN_B]]
+        if move > 0.0:
+            ratio = min(ratio, floats[c, GAP] / move)
+    return ratio
+
+
+def pairwise_distance_ratio(disp: np.ndarray, moved: np.ndarray, ints: np.ndarray, floats: np.ndarray,
+                            candidates: np.ndarray, gbar: float, margin: float,
+                            plane_distance: np.ndarray) -> float:  # fmt: skip
+    """Largest alpha such that moving every surface s by alpha disp[s] cannot bring two surfaces into
+    contact unseen, with a bound per pair instead of one for the whole scene:
+    - feature pairs within the layer (ints): alpha (d_a + d_b) < gap;
+    - candidate surface pairs of the step's search: at least gbar apart when not in ints;
+    - every other pair was at least gbar + margin apart at the start of the step (the search's
+      reach) and its surfaces have moved by `moved` since: alpha top2(d) < gbar + margin - top2(moved);
+    - planes (plane_distance, (G, n_planes) distance of each grain's lowest vertex over each
+      active plane): alpha d_g < that distance.
+    A grain falling fast no longer shortens the updates of every other pair (the global bound did)."""
+    ratio = _pair_ratio(np.ascontiguousarray(candidates, dtype=np.int64), disp, ints, floats, gbar)
+    top2 = np.sort(disp)[-2:].sum() if len(disp) > 1 else 0.0
+    if top2 > 0:
+        room = gbar + margin - (np.sort(moved)[-2:].sum() if len(moved) > 1 else 0.0)
+        ratio = min(ratio, max(room, gbar) / top2 if room > gbar else gbar / top2)
+    if plane_distance.size:
+        d = disp[: len(plane_distance)]
+        moving = d > 0
+        if moving.any():
+            ratio = min(ratio, float(np.min(plane_distance[moving] / d[moving, None])))
+    return ratio
+
+
 def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> int:
     """Pairs that appear only in a search at the end of a step and are already inside the
     activation gap: the step passed them by (formulation.md 4.5). `contact` is the ContactModel."""

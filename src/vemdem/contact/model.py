@@ -21,6 +21,7 @@ from numba import njit
 
 from .broad import candidate_pairs, grain_boxes
 from .forces import (
+    contact_points,
     evaluate_contacts,
     force_on_side_a,
     gap_rates,
@@ -106,6 +107,10 @@ class ContactResult:
         all_nodes = int(self.ints[:, NODE0:].max()) + 1 if len(self.ints) else n
         K = local_tangent_matrix(self.ints, self.pair_tangent, max(all_nodes, n))
         return K[: 3 * n, : 3 * n].tocsr()
+
+    def points(self, x_all: np.ndarray) -> np.ndarray:
+        """(m, 3) contact point of every pair on its side B (frames show them)."""
+        return contact_points(x_all, self.ints, self.floats) if len(self.ints) else np.zeros((0, 3))
 
     def add_to_blocks(self, vertex_grain, vertex_ptr, block_ptr, blocks) -> sp.csr_matrix:
         """Add the contact tangent's within-grain terms to the grains' dense blocks (in place) and

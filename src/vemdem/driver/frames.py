@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contact.forces import contact_points
 from ..io.results import CsvLog
 from ..io.vtk import PvdSeries
 from ..model.scene import Scene
@@ -49,7 +48,7 @@ class FrameWriter:
     def _write_vtk(self, state, cr):
         s = self.scene
         x_all = s.contact.all_positions(state.x, state.t)
-        points = contact_points(x_all, cr.ints, cr.floats) if cr.n_contacts else np.zeros((0, 3))
+        points = cr.points(x_all)
         n, m = s.n_vertices, len(points)
         sigma = s.bodies.cauchy_stress(state.x).reshape(-1, 9)
         cells_pt = (n + np.arange(m)).reshape(-1, 1)

@@ -25,8 +25,8 @@ class SolverOptions:
     """The `[solver]` table, checked and typed (config/build.py makes it)."""
 
     integrator: str = "implicit"
-    beta: float = 0.3
-    gamma: float = 0.5
+    beta: float = 0.3025
+    gamma: float = 0.6
     dt: float = 1e-5
     dt_min: float = 1e-10
     dt_max: float = 1e-4

@@ -18,7 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.ccd import free_distance_ratio, impact_step_limit, missed_pairs, surface_displacements
+from ..contact.ccd import (
+    free_distance_ratio,
+    impact_step_limit,
+    missed_pairs,
+    pairwise_distance_ratio,
+    plane_distances,
+    surface_displacements,
+)
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
@@ -38,6 +45,7 @@ class NewmarkParameters:
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
     predictor: str = "rest"  # first iterate: "rest" (x_n) or "acceleration" (x_n + dt v_n + dt^2/2 a_n, CCD-bounded)
+    ccd: str = "global"  # Newton update bound: "global" (one bound for all pairs) or "pairwise" (contact.ccd)
     accuracy: float = 0.0  # > 0: converged when a1 |dx| <= accuracy |g| (the step's own accuracy); 0: strict test
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
 
@@ -59,6 +67,19 @@ def _free_distance_ratio(scene: Scene, dx, ints, floats) -> float:
     n_surfaces = len(contact.topology.grain_vertex_ptr) - 1 + len(contact.planes)
     disp = surface_displacements(dx, scene.bodies.vertex_ptr, n_surfaces)
     return free_distance_ratio(disp, ints, floats, contact.law.activation_gap)
+
+
+def _pairwise_ratio(scene: Scene, dx, du, x, t, ints, floats, candidates, margin) -> float:
+    """contact.ccd.pairwise_distance_ratio for a Newton update dx at x (du: the step's displacement
+    so far, for pairs outside the step's search)."""
+    contact = scene.contact
+    vptr = scene.bodies.vertex_ptr
+    n_surfaces = len(contact.topology.grain_vertex_ptr) - 1 + len(contact.planes)
+    disp = surface_displacements(dx, vptr, n_surfaces)
+    moved = surface_displacements(du, vptr, n_surfaces)
+    planes = [p for p in contact.planes if p.motion.active(t)]
+    dist = np.column_stack([plane_distances(x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
+    return pairwise_distance_ratio(disp, moved, ints, floats, candidates, contact.law.activation_gap, margin, dist)
 
 
 def newton_blocks(scene: Scene, el, cr, mass_shift: float):
@@ -108,7 +129,11 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
         blocks, coupling = newton_blocks(scene, el, cr, a1 + params.mass_damping * a4)
         dx = -solve(scene.bodies.tangent_matrix(blocks) + coupling, R).reshape(-1, 3)
-        alpha = min(1.0, params.ccd_fraction * _free_distance_ratio(scene, dx, cr.ints, cr.floats))
+        if params.ccd == "pairwise":
+            ratio = _pairwise_ratio(scene, dx, du, x, t1, cr.ints, cr.floats, candidates, 2.0 * travel)
+        else:
+            ratio = _free_distance_ratio(scene, dx, cr.ints, cr.floats)
+        alpha = min(1.0, params.ccd_fraction * ratio)
         x = x + alpha * dx
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
