@@ -240,6 +240,11 @@ class ContactModel:
         return np.vstack(ints), np.vstack(floats)
 
     # ------------------------------------------------------------------ forces
+    def potential(self, x, t, candidates) -> float:
+        """The contact potential sum Phi(d) alone (no friction, no tangent): a line-search merit."""
+        x_all, ints, floats = self.pairs(x, t, candidates)
+        return evaluate_contacts(x_all, ints, floats, self.law_params, len(x_all), False).total_energy
+
     def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
                  tangent: bool = False) -> ContactResult:  # fmt: skip
         """Contact energy, residual (dPhi/dx + dissipative terms), tangent and wall reactions.

@@ -14,6 +14,8 @@ import numpy as np
 
 from ..model.scene import Scene
 from .explicit import ExplicitIntegrator, ExplicitParameters, advance_explicit, explicit_initial_state
+from .linear import NAMES as LINEAR_SOLVERS
+from .linear import make_linear_solver
 from .newmark import NewmarkParameters, advance, initial_state
 from .state import RunStats, State, StepControl
 
@@ -35,10 +37,13 @@ class SolverOptions:
     entry_fraction: float = 0.05
     safety: float = 0.5
     mass_damping: float = 0.0
+    linear: str = "auto"  # implicit: linear solver of the Newton systems (solver/linear/)
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
+        if self.linear not in LINEAR_SOLVERS:
+            raise ValueError(f"linear must be one of {LINEAR_SOLVERS}, got {self.linear!r}")
 
 
 class Integrator(Protocol):
@@ -61,7 +66,8 @@ class ImplicitNewmark:
         self.scene = scene
         self.control = _control(options)
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
-                                        mass_damping=options.mass_damping)  # fmt: skip
+                                        mass_damping=options.mass_damping,
+                                        linear=make_linear_solver(options.linear))  # fmt: skip
 
     def initial_state(self, x0=None, v0=None) -> State:
         return initial_state(self.scene, x0=x0, v0=v0)

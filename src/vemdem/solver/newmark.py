@@ -29,7 +29,7 @@ from ..contact.ccd import (
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
-from .linear import solve
+from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
 __all__ = ["NewmarkParameters", "advance", "initial_state", "newmark_step", "step_limit"]
@@ -45,6 +45,9 @@ class NewmarkParameters:
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
     predictor: str = "rest"  # first iterate: "rest" (x_n) or "acceleration" (x_n + dt v_n + dt^2/2 a_n, CCD-bounded)
+    linear: object = None  # a solver.linear LinearSolver, made once per run (None: "auto")
+    krylov_rtol: float = 1e-8  # relative residual of iterative linear solves (inexact Newton)
+    line_search: bool = False  # backtrack on the incremental potential (IPC's merit) while the update is large
     ccd: str = "global"  # Newton update bound: "global" (one bound for all pairs) or "pairwise" (contact.ccd)
     accuracy: float = 0.0  # > 0: converged when a1 |dx| <= accuracy |g| (the step's own accuracy); 0: strict test
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
@@ -93,6 +96,53 @@ def newton_blocks(scene: Scene, el, cr, mass_shift: float):
     return blocks, coupling
 
 
+_DEFAULT_LINEAR = []
+
+
+def _default_linear():
+    """The "auto" solver for callers that pass none (one per process: it keeps no state that
+    matters between systems)."""
+    if not _DEFAULT_LINEAR:
+        _DEFAULT_LINEAR.append(make_linear_solver("auto"))
+    return _DEFAULT_LINEAR[0]
+
+
+class _IncrementalPotential:
+    """E(x) = a1/2 (x - x~)^T M (x - x~) + W_int(x) + Phi_c(x) - f_g . x, x~ = x_n + dt v_n +
+    dt^2 (1/2 - beta) a_n: its gradient is the Newmark residual without the dissipative terms, so a
+    backtracking line search on it damps Newton's overshoot into the barrier (as in IPC)."""
+
+    def __init__(self, scene, state, dt, a1, beta, f_grav, t1, candidates):
+        self.scene, self.a1, self.f_grav, self.t1, self.candidates = scene, a1, f_grav, t1, candidates
+        self.x_tilde = (state.x + dt * state.v + dt * dt * (0.5 - beta) * state.a).ravel()
+        self.M = scene.mass_matrix()
+
+    def value(self, x, strain_energy=None, contact_energy=None) -> float:
+        s = self.scene
+        if strain_energy is None:
+            strain_energy = s.bodies.evaluate(x, force=False).total_energy
+        if contact_energy is None:
+            contact_energy = s.contact.potential(x, self.t1, self.candidates)
+        r = x.ravel() - self.x_tilde
+        return 0.5 * self.a1 * float(r @ (self.M @ r)) + strain_energy + contact_energy - float(self.f_grav @ x.ravel())
+
+    def backtrack(self, x, dx, alpha, e0, slope, halvings: int = 6) -> float:
+        """Largest alpha 2^-k with an Armijo decrease; alpha itself when the direction does not
+        descend (dissipative terms dominate) or no trial decreases E (round-off near convergence)."""
+        if not slope < 0:
+            return alpha
+        trial = alpha
+        for _ in range(halvings):
+            try:
+                e = self.value(x + trial * dx)
+            except (InvertedElementError, PenetrationError):
+                e = np.inf
+            if e <= e0 + 1e-4 * trial * slope:
+                return trial
+            trial *= 0.5
+        return alpha
+
+
 def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameters) -> tuple[State, StepInfo]:
     b, gam = params.beta, params.gamma
     a1, a2, a3 = 1 / (b * dt * dt), 1 / (b * dt), 1 / (2 * b) - 1
@@ -112,6 +162,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         alpha0 = min(1.0, params.ccd_fraction * _free_distance_ratio(scene, guess, ints0, floats0))
         x = x + alpha0 * guess
     size = float(np.cbrt(scene.bodies.volume.mean()))
+    linear = params.linear if params.linear is not None else _default_linear()
+    krylov = 0
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
@@ -128,12 +180,17 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             raise StepRejected("non-finite residual")
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
         blocks, coupling = newton_blocks(scene, el, cr, a1 + params.mass_damping * a4)
-        dx = -solve(scene.bodies.tangent_matrix(blocks) + coupling, R).reshape(-1, 3)
+        linear.factor(NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x))
+        dx = -linear.solve(R, params.krylov_rtol).reshape(-1, 3)
+        krylov += linear.stats.last_iterations
         if params.ccd == "pairwise":
             ratio = _pairwise_ratio(scene, dx, du, x, t1, cr.ints, cr.floats, candidates, 2.0 * travel)
         else:
             ratio = _free_distance_ratio(scene, dx, cr.ints, cr.floats)
         alpha = min(1.0, params.ccd_fraction * ratio)
+        if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
+            merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
+            alpha = merit.backtrack(x, dx, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = x + alpha * dx
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
@@ -163,7 +220,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         raise StepRejected(f"{missed} contact pairs appeared inside the activation gap during the step")
     power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
-    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr)
+    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov)
     return new, info
 
 
@@ -204,6 +261,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         limit = step_limit(scene, state, control)
         stats.accepted += 1
         stats.newton_iterations += info.iterations
+        stats.krylov_iterations += info.krylov_iterations
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)

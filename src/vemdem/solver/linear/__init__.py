@@ -1,0 +1,58 @@
+"""The linear-solver room: `make_linear_solver(name)` -> a solver of Newton systems.
+
+    direct        dense LU (small) or SuperLU of the assembled matrix (direct.py)
+    grain-block   GMRES + two-level grain-block preconditioner (grain_block.py)
+    auto          direct up to DENSE_LIMIT dofs (a dense LU: a few grains), grain-block above
+                  (measured: docs/linear-solvers.md)
+"""
+
+from .base import LinearSolveDiverged, LinearSolver, NewtonSystem, SingularSystemError, SolverStats
+from .direct import DENSE_LIMIT, DirectSolver, pypardiso, solve, sparse_backend
+from .grain_block import GrainBlockSolver, rigid_modes
+
+NAMES = ("auto", "direct", "grain-block")
+class AutoSolver:
+    """Picks direct (dense LU) or grain-block per system by its size (the measured crossover)."""
+
+    name = "auto"
+
+    def __init__(self):
+        self.direct, self.block = DirectSolver(), GrainBlockSolver()
+        self.stats = self.block.stats
+        self._current = self.block
+
+    def factor(self, system: NewtonSystem) -> None:
+        self._current = self.block if system.n > DENSE_LIMIT and system.n_bodies > 1 else self.direct
+        self._current.factor(system)
+
+    def solve(self, rhs, rtol: float = 1e-10):
+        return self._current.solve(rhs, rtol)
+
+
+def make_linear_solver(name: str = "auto") -> LinearSolver:
+    if name == "direct":
+        return DirectSolver()
+    if name == "grain-block":
+        return GrainBlockSolver()
+    if name == "auto":
+        return AutoSolver()
+    raise ValueError(f"linear solver must be one of {NAMES}, got {name!r}")
+
+
+__all__ = [
+    "DENSE_LIMIT",
+    "NAMES",
+    "AutoSolver",
+    "DirectSolver",
+    "GrainBlockSolver",
+    "LinearSolveDiverged",
+    "LinearSolver",
+    "NewtonSystem",
+    "SingularSystemError",
+    "SolverStats",
+    "make_linear_solver",
+    "pypardiso",
+    "rigid_modes",
+    "solve",
+    "sparse_backend",
+]

@@ -1,0 +1,116 @@
+"""The linear-solver room: one interface for every solver of the Newton systems.
+
+A Newton system keeps the structure the physics gives it (issue 14): the dense block of every body
+(element tangent + a1 M + the contact terms within the body) and one sparse coupling matrix (the
+contact terms between bodies), plus the positions that define each body's rigid modes:
+
+    K = blockdiag(B_1 .. B_G) + C
+
+A `LinearSolver` is made once per run (`make_linear_solver`), is handed each Newton matrix
+(`factor`), may keep state across iterations, and solves to a relative residual the caller asks
+for (`solve(rhs, rtol)`: inexact Newton). No solver assumes symmetry: friction makes K
+non-symmetric.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit, prange
+
+
+class SingularSystemError(np.linalg.LinAlgError):
+    """The matrix cannot be solved: str(e) names the cause (a free rigid mode, a singular body)."""
+
+
+class LinearSolveDiverged(np.linalg.LinAlgError):
+    """An iterative solve did not reach its tolerance: str(e) gives the residual and iterations."""
+
+
+@njit(parallel=True, cache=True)
+def _block_matvec(blocks, block_ptr, dof_ptr, u, out):
+    for g in prange(len(dof_ptr) - 1):
+        d0, n = dof_ptr[g], dof_ptr[g + 1] - dof_ptr[g]
+        b0 = block_ptr[g]
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += blocks[b0 + i * n + j] * u[d0 + j]
+            out[d0 + i] = s
+
+
+@dataclass
+class NewtonSystem:
+    blocks: np.ndarray  # flat dense row-major block of each body at block_ptr[g]
+    block_ptr: np.ndarray  # (G+1,)
+    dof_ptr: np.ndarray  # (G+1,) body g owns dofs dof_ptr[g]:dof_ptr[g+1]
+    coupling: sp.csr_matrix | None = None  # entries between different bodies only
+    positions: np.ndarray | None = None  # (N, 3) vertex positions (flexible bodies: rigid modes)
+    _csr: sp.csr_matrix | None = field(default=None, repr=False)
+
+    @property
+    def n(self) -> int:
+        return int(self.dof_ptr[-1])
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self.dof_ptr) - 1
+
+    def matvec(self, u: np.ndarray) -> np.ndarray:
+        out = np.empty(self.n)
+        _block_matvec(self.blocks, self.block_ptr, self.dof_ptr, np.ascontiguousarray(u, float), out)
+        if self.coupling is not None and self.coupling.nnz:
+            out += self.coupling @ u
+        return out
+
+    def to_csr(self) -> sp.csr_matrix:
+        """The exact global matrix (block data are the CSR data of the block diagonal)."""
+        if self._csr is None:
+            n = self.n
+            sizes = np.diff(self.dof_ptr)
+            indptr = np.zeros(n + 1, np.int64)
+            np.cumsum(np.repeat(sizes, sizes), out=indptr[1:])
+            indices = np.concatenate([np.tile(np.arange(d0, d0 + s), s) for d0, s in zip(self.dof_ptr[:-1], sizes)])
+            K = sp.csr_matrix((self.blocks, indices, indptr), shape=(n, n))
+            if self.coupling is not None and self.coupling.nnz:
+                K = K + self.coupling
+            self._csr = K.tocsr()
+        return self._csr
+
+    @classmethod
+    def from_csr(cls, K, dof_ptr, positions=None) -> "NewtonSystem":
+        """Split a global matrix into body blocks and coupling (tests, benchmarks, old callers)."""
+        K = sp.csr_matrix(K)
+        dof_ptr = np.asarray(dof_ptr, np.int64)
+        body = np.repeat(np.arange(len(dof_ptr) - 1), np.diff(dof_ptr))
+        coo = K.tocoo()
+        inside = body[coo.row] == body[coo.col]
+        sizes = np.diff(dof_ptr)
+        block_ptr = np.concatenate([[0], np.cumsum(sizes**2)]).astype(np.int64)
+        blocks = np.zeros(block_ptr[-1])
+        r, c, v = coo.row[inside], coo.col[inside], coo.data[inside]
+        g = body[r]
+        np.add.at(blocks, block_ptr[g] + (r - dof_ptr[g]) * sizes[g] + (c - dof_ptr[g]), v)
+        out = ~inside
+        coupling = sp.csr_matrix((coo.data[out], (coo.row[out], coo.col[out])), shape=K.shape)
+        return cls(blocks, block_ptr, dof_ptr, coupling, positions)
+
+
+@dataclass
+class SolverStats:
+    factorisations: int = 0
+    solves: int = 0
+    iterations: int = 0  # Krylov iterations, all solves
+    last_iterations: int = 0
+
+
+class LinearSolver(Protocol):
+    name: str
+    stats: SolverStats
+
+    def factor(self, system: NewtonSystem) -> None: ...
+
+    def solve(self, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray: ...
