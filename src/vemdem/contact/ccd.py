@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .forces import pair_inverse_masses
 from .law import normal_stiffness
 from .pairs import GAP, GRAIN_A, GRAIN_B, find_contacts
 
@@ -118,6 +119,20 @@ def impact_step_limit(gap: np.ndarray, rate: np.ndarray, m_eq: np.ndarray, law_p
     if loaded.any():
         limit = min(limit, np.pi * np.sqrt(np.min(m_eq[loaded] / k[loaded])) / impact_steps)
     return limit
+
+
+def stiffest_pair_frequency(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params) -> float:
+    """omega of the stiffest active pair: omega^2 = k(g) sum_i w_i^2 / m_i (the pair's spring on the
+    lumped masses of its nodes; a wall node has 1/m = 0). 0 without pairs."""
+    if len(ints) == 0:
+        return 0.0
+    k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), law_params)
+    return float(np.sqrt(np.max(k * pair_inverse_masses(inv_mass_all, ints, floats))))
+
+
+def pair_gaps(floats: np.ndarray) -> np.ndarray:
+    """The gap of every pair (the column layout stays inside contact/)."""
+    return floats[:, GAP]
 
 
 @njit(cache=True)

@@ -31,11 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.ccd import closing_time, grain_speeds, plane_distances
-from ..contact.forces import pair_inverse_masses
-from ..contact.law import normal_stiffness
+from ..contact.ccd import closing_time, grain_speeds, pair_gaps, plane_distances, stiffest_pair_frequency
 from ..contact.model import PenetrationError
-from ..contact.pairs import GAP
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
@@ -103,8 +100,7 @@ class ExplicitIntegrator:
     def stable_step(self, state: State, ints, floats) -> float:
         dt = self.grain_dt
         if len(ints):
-            k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), self.scene.contact.law_params)
-            omega = np.sqrt(np.max(k * pair_inverse_masses(self.inv_mass_all, ints, floats)))
+            omega = stiffest_pair_frequency(self.inv_mass_all, ints, floats, self.scene.contact.law_params)
             if omega > 0:
                 dt = min(dt, self.damping_factor * 2.0 / omega)
         dt *= self.params.safety
@@ -132,7 +128,7 @@ class ExplicitIntegrator:
             rate = scene.contact.rates(state.x, state.v, state.t, ints, floats)
             closing = rate < 0
             if closing.any():
-                limit = f * float(np.min(floats[closing, GAP] / -rate[closing]))
+                limit = f * float(np.min(pair_gaps(floats)[closing] / -rate[closing]))
         pairs = self._candidates["pairs"] if self._candidates is not None else np.zeros((0, 2), np.int64)
         if len(pairs):
             other = pairs[:, 1]
@@ -163,7 +159,7 @@ class ExplicitIntegrator:
             acc, strain, cr = self.forces(x, v_half, t1, state.history)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
-        if len(cr.ints) and np.min(cr.floats[:, GAP]) <= 0:
+        if len(cr.ints) and np.min(pair_gaps(cr.floats)) <= 0:
             raise StepRejected("a contact gap closed")
         v = v_half + 0.5 * dt * acc
         power = cr.dissipation_power + self.params.mass_damping * float(

@@ -1,0 +1,110 @@
+"""The import rules of docs/architecture.md, checked on the source: a rule broken in review is a
+failing test here, not a comment."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "vemdem"
+
+# room -> rooms it may import (a room always may import itself). A dotted entry allows one module.
+ALLOWED = {
+    "geometry": set(),
+    "vem": {"geometry"},
+    "contact": {"geometry"},
+    "model": {"vem", "contact", "geometry"},
+    "solver": {"model", "contact"},
+    "driver": {"solver", "model", "io", "contact.model"},
+    "io": {"geometry", "contact.walls"},
+    "analysis": {"io", "geometry"},
+    "config": {"model", "vem", "contact", "geometry", "io", "solver.api"},
+    "scenarios": {"config", "driver", "solver.api", "solver.statics", "solver.state", "model", "geometry", "io",
+                  "analysis", "contact.walls"},  # fmt: skip
+    "verification": {"solver", "model", "vem", "geometry", "scenarios.plates"},
+    "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep"},
+    "sweep": {"config", "scenarios.registry", "analysis.plots"},
+}
+# finer rules inside a room
+FORBIDDEN = {
+    "solver": {"vem", "contact.pairs", "contact.law", "contact.narrow", "scenarios", "driver", "config", "io"},
+    "config.schema": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+}
+
+
+def _modules():
+    for path in sorted(SRC.rglob("*.py")):
+        rel = path.relative_to(SRC).with_suffix("")
+        parts = [p for p in rel.parts if p != "__init__"]
+        yield ".".join(parts), path, path.name == "__init__.py"
+
+
+def _imports(module: str, path: Path, is_package: bool):
+    """Every vemdem module this file imports, as a dotted name below vemdem."""
+    tree = ast.parse(path.read_text())
+    package = module.split(".") if is_package else module.split(".")[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1] if node.level > 1 else package
+                target = ".".join([*base, node.module] if node.module else base)
+            elif node.module and node.module.startswith("vemdem"):
+                target = node.module.removeprefix("vemdem").lstrip(".")
+            else:
+                continue
+            names = [f"{target}.{a.name}" if target else a.name for a in node.names]
+            yield from (n if (SRC / n.replace(".", "/")).with_suffix(".py").exists() or (SRC / n.replace(".", "/")).is_dir()
+                        else target for n in names)  # fmt: skip
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("vemdem."):
+                    yield a.name.removeprefix("vemdem.")
+
+
+def _matches(target: str, rule: str) -> bool:
+    return target == rule or target.startswith(rule + ".")
+
+
+def _violations():
+    out = []
+    for module, path, is_package in _modules():
+        room = module.split(".")[0]
+        if room not in ALLOWED:
+            continue
+        for target in _imports(module, path, is_package):
+            if not target or _matches(target, room):
+                if any(_matches(module, m) and _matches(target, f) for m, fs in FORBIDDEN.items() for f in fs):
+                    out.append(f"{module} imports {target}")
+                continue
+            allowed = any(_matches(target, rule) for rule in ALLOWED[room])
+            forbidden = any(_matches(module, m) and _matches(target, f) for m, fs in FORBIDDEN.items() for f in fs)
+            if not allowed or forbidden:
+                out.append(f"{module} imports {target}")
+    return out
+
+
+def test_every_room_is_listed():
+    rooms = {m.split(".")[0] for m, _, _ in _modules()} - {"", "__main__"}
+    assert rooms <= set(ALLOWED), f"rooms without rules: {sorted(rooms - set(ALLOWED))}"
+
+
+def test_import_rules_hold():
+    assert _violations() == []
+
+
+@pytest.mark.parametrize("source,module,expected", [
+    ("from ..vem.element import evaluate\n", "solver.newmark", "solver.newmark imports vem.element"),
+    ("from ..scenarios import pack\n", "driver.loop", "driver.loop imports scenarios.pack"),
+    ("from ..model.scene import Scene\n", "contact.ccd", "contact.ccd imports model.scene"),
+])  # fmt: skip
+def test_a_broken_rule_is_caught(tmp_path, monkeypatch, source, module, expected):
+    """The checker itself: a forbidden import planted in a copy of the tree is reported."""
+    import shutil
+
+    copy = tmp_path / "vemdem"
+    shutil.copytree(SRC, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    path = copy / (module.replace(".", "/") + ".py")
+    path.write_text(source + path.read_text())
+    monkeypatch.setattr(__import__(__name__), "SRC", copy)
+    assert expected in _violations()
