@@ -10,12 +10,12 @@ m is the lumped (row-sum) mass; the velocity-dependent contact terms (damping, f
 half-step velocity. The forces are the same kernels as the implicit integrator's, without tangents.
 
 Stable step, recomputed every step (the safety factor covers the nonlinearity):
-    dt = safety * min(2/omega_grain, (sqrt(1 + zeta^2) - zeta) 2/omega_contact, approach limit)
+    dt = safety * min(2/omega_grain, min over pairs (sqrt(1 + zeta_p^2) - zeta_p) 2/omega_p, approach limit)
 - omega_grain: the largest eigenvalue of each grain's (K, m) pair at rest, once per run;
-- omega_contact^2 = max over active pairs of k(g) sum_i w_i^2 / m_i, the pair's weights w on its
-  nodes' lumped masses (a wall node has 1/m = 0), k(g) the current contact stiffness: the exact
-  eigenvalue of the pair's spring; the damping ratio zeta shortens the step of a damped
-  oscillator by the factor in front of it;
+- omega_p^2 = k(g) sum_i w_i^2 / m_i for each active pair, its weights w on its nodes' lumped
+  masses (a wall node has 1/m = 0), k(g) the current contact stiffness: the exact eigenvalue of
+  the pair's spring; zeta_p the damping ratio its normal damping really has on those masses
+  (contact.ccd.damped_contact_step: 2-4 for the default zeta = 0.5, issue 17);
 - approach: no step may close more than `approach_fraction` of a pair's gap, at its exact gap rate
   for pairs in the activation layer, at a bound on the speed for pairs not yet in it.
 A step whose end state is not admissible (a vertex behind a wall, an inverted element, a non-finite
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.ccd import closing_time, grain_speeds, pair_gaps, plane_distances, stiffest_pair_frequency
+from ..contact.ccd import closing_time, damped_contact_step, grain_speeds, pair_gaps, plane_distances
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
@@ -58,8 +58,6 @@ class ExplicitIntegrator:
         self.f_grav = scene.bodies.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
         n_wall_nodes = len(scene.contact.wall_nodes(0.0))
         self.inv_mass_all = np.concatenate([1.0 / scene.bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
-        zeta = scene.contact.friction.damping_ratio
-        self.damping_factor = np.sqrt(1.0 + zeta * zeta) - zeta
         self.skin = params.skin_gaps * scene.contact.law.activation_gap
         self._candidates = None
 
@@ -100,9 +98,9 @@ class ExplicitIntegrator:
     def stable_step(self, state: State, ints, floats) -> float:
         dt = self.grain_dt
         if len(ints):
-            omega = stiffest_pair_frequency(self.inv_mass_all, ints, floats, self.scene.contact.law_params)
-            if omega > 0:
-                dt = min(dt, self.damping_factor * 2.0 / omega)
+            contact = self.scene.contact
+            dt = min(dt, damped_contact_step(self.inv_mass_all, ints, floats, contact.law_params,
+                                             contact.masses_of_pairs(ints), contact.friction.damping_ratio))  # fmt: skip
         dt *= self.params.safety
         return min(dt, self.approach_limit(state, ints, floats))
 
