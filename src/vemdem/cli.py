@@ -16,24 +16,38 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from . import sweep
 from .config import ConfigError, load_toml
 from .driver.checkpoint import CheckpointError
 from .driver.loop import InitialStateError
-from .scenarios.registry import EXAMPLES, checked_config, example_text
+from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_text
+
+# what a run writes into --out: --overwrite removes these and nothing else
+KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "history.csv", "grains.csv", "walls.csv",
+                 "grains.pvd", "grains", "grain.pvd", "grain", "state.npz", "pile.png", "force_strain.csv",
+                 "force_strain.png", "pack")  # fmt: skip
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="vemdem", description="Flexible polyhedral grains: VEM-DEM simulations")
+    p.add_argument("--version", action="version", version=f"vemdem {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run the scenario described by a TOML config")
+    run = sub.add_parser(
+        "run", help="run the scenario described by a TOML config",
+        description=f"Run a scenario ({', '.join(SCENARIOS)}). `vemdem example` lists ready configs; "
+                    "`vemdem example NAME > job.toml` writes one to start from.",
+    )  # fmt: skip
     run.add_argument("config", type=Path)
     run.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
-    run.add_argument("--resume", action="store_true", help="continue an interrupted run from DIR/checkpoint.npz")
+    mode = run.add_mutually_exclusive_group()
+    mode.add_argument("--resume", action="store_true", help="continue an interrupted run from DIR/checkpoint.npz")
+    mode.add_argument("--overwrite", action="store_true", help="replace the results of an earlier run in DIR")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")
     _add_sweep_parser(sub)
@@ -84,23 +98,64 @@ def _progress_bar(quiet: bool):
     return update
 
 
+def _version() -> str:
+    try:
+        return version("vemdem")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _prepare_out(out: Path, resume: bool, overwrite: bool) -> bool:
+    """Check --out (and clear it with --overwrite); True when this run creates the folder."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} is a file, not a folder")
+    used = [name for name in KNOWN_OUTPUTS if (out / name).exists()] if out.is_dir() else []
+    if used and not (resume or overwrite):
+        raise ConfigError(f"--out: {out} holds the results of another run ({', '.join(used[:3])}); "
+                          "use --resume to continue it, --overwrite to replace it, or another folder")  # fmt: skip
+    if overwrite:
+        for name in used:
+            target = out / name
+            shutil.rmtree(target) if target.is_dir() else target.unlink()
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".vemdem-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(f"--out: cannot write to {out} ({exc.strerror or exc})") from None
+    return created
+
+
+def _remove_if_empty(out: Path, created: bool) -> None:
+    if created and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+
+
 def cmd_run(args) -> int:
     try:
         cfg, module = checked_config(load_toml(args.config))
+        if args.resume and not getattr(module, "RESUMABLE", False):
+            raise ConfigError(f"--resume: {cfg['scenario']} runs cannot be resumed (they are short)")
+        created = _prepare_out(args.out, args.resume, args.overwrite)
     except ConfigError as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
-    if args.resume and not getattr(module, "RESUMABLE", False):
-        print(f"vemdem: {cfg['scenario']} runs cannot be resumed (they are short)", file=sys.stderr)
-        return 2
-    args.out.mkdir(parents=True, exist_ok=True)
     try:
         kwargs = {"resume": True} if args.resume else {}
         summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
     except (ConfigError, CheckpointError, InitialStateError) as exc:
+        _remove_if_empty(args.out, created)
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        _remove_if_empty(args.out, created)
+        print(f"\nvemdem: interrupted; continue from the last checkpoint with: vemdem run {args.config} --out {args.out} "
+              "--resume", file=sys.stderr)  # fmt: skip
+        return 130
     except (ArithmeticError, RuntimeError, ValueError, OSError) as exc:
+        _remove_if_empty(args.out, created)
         print(f"vemdem: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"vemdem: results written so far are in {args.out}", file=sys.stderr)
         return 1

@@ -48,12 +48,23 @@ def _plain(v):
     return v
 
 
-def write_json(path: Path, data: dict) -> None:
-    def default(o):
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-        if isinstance(o, np.generic):
-            return o.item()
-        raise TypeError(f"not JSON serialisable: {type(o)}")
+def strict(value):
+    """JSON-ready: NumPy values as Python ones, and non-finite floats as null (strict JSON has no
+    NaN; the field's `*_error` sibling, where there is one, says why)."""
+    if isinstance(value, dict):
+        return {k: strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return strict(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
-    Path(path).write_text(json.dumps(data, indent=2, default=default) + "\n")
+
+def write_json(path: Path, data: dict) -> None:
+    """A summary as strict JSON (allow_nan=False: a NaN that slipped through is an error here,
+    not an unreadable file for the user's tools)."""
+    Path(path).write_text(json.dumps(strict(data), indent=2, allow_nan=False) + "\n")
