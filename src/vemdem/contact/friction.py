@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from .law import C2, EPS1, EPS2, GBAR, GBB, N1, N2
+from .law import normal_force
 from .narrow import (
     EDGE_EDGE,
     N_NODES,
@@ -75,17 +75,6 @@ MU_S, MU_D, EPS_T, C_T, ZETA = range(5)
 
 
 @njit(cache=True)
-def _law(d, p):
-    """f_n and k of law.py for real or complex d (branches on the real part)."""
-    if d.real >= p[GBAR]:
-        return 0.0 * d, 0.0 * d
-    if d.real > p[GBB]:
-        s = p[GBAR] - d
-        return p[EPS1] * s ** p[N1], p[EPS1] * p[N1] * s ** (p[N1] - 1.0)
-    return p[EPS2] * d ** p[N2] + p[C2], -p[EPS2] * p[N2] * d ** (p[N2] - 1.0)
-
-
-@njit(cache=True)
 def _lcp_coords(kind, xs):
     """The LCP solution (c0, c1) for real or complex positions (no range test)."""
     zero = 0.0 * xs[0, 0]
@@ -122,7 +111,7 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
         vrel += w[i] * vi
     d = np.sqrt(np.sum(g * g))
     n = g / d
-    fn, k = _law(d, law)
+    fn, k = normal_force(d, law)
     gn_dot = np.sum(n * vrel)
     c_n = 2.0 * fr[ZETA] * np.sqrt(k * m_eq)
     f_damp = -c_n * gn_dot

@@ -59,14 +59,17 @@ class InterfaceLaw:
 
 @njit(cache=True)
 def normal_force(g, p):
-    """(f_n, k) at gap g: repulsive force magnitude and stiffness -df_n/dg."""
-    if g >= p[GBAR]:
-        return 0.0, 0.0
-    if g > p[GBB]:
+    """(f_n, k) at gap g: repulsive force magnitude and stiffness -df_n/dg. One definition for
+    real gaps and for the complex gaps of the complex-step friction tangent (friction.py): the
+    branches read the real part, the formulas carry the imaginary one."""
+    zero = 0.0 * g
+    if g.real >= p[GBAR]:
+        return zero, zero
+    if g.real > p[GBB]:
         d = p[GBAR] - g
         return p[EPS1] * d ** p[N1], p[EPS1] * p[N1] * d ** (p[N1] - 1.0)
-    if g <= 0.0:
-        return np.inf, np.inf
+    if g.real <= 0.0:
+        return zero + np.inf, zero + np.inf
     return p[EPS2] * g ** p[N2] + p[C2], -p[EPS2] * p[N2] * g ** (p[N2] - 1.0)
 
 

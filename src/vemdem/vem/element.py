@@ -77,9 +77,6 @@ class GrainElements:
     def n_vertices(self) -> int:
         return len(self.reference)
 
-    def grain_of_vertex(self) -> np.ndarray:
-        return np.repeat(np.arange(self.n_grains), np.diff(self.vertex_ptr))
-
 
 def tet_gradients(points: np.ndarray, tets: np.ndarray):
     """Volumes (m,) and shape-function gradients (m, 4, 3) of linear tetrahedra."""
@@ -360,21 +357,6 @@ def _csr_structure(elements: GrainElements):
     indices = np.concatenate(tiles) if tiles else np.zeros(0, dtype=dtype)
     result = (indptr, indices)
     object.__setattr__(elements, "_csr_structure", result)
-    return result
-
-
-def block_indices(elements: GrainElements):
-    """Global (row, col) dof of every entry of the flat tangent blocks (cached on the object)."""
-    cached = getattr(elements, "_block_indices", None)
-    if cached is not None:
-        return cached
-    rows, cols = [], []
-    for g in range(elements.n_grains):
-        dofs = np.arange(3 * elements.vertex_ptr[g], 3 * elements.vertex_ptr[g + 1])
-        rows.append(np.repeat(dofs, len(dofs)))
-        cols.append(np.tile(dofs, len(dofs)))
-    result = (np.concatenate(rows), np.concatenate(cols))
-    object.__setattr__(elements, "_block_indices", result)
     return result
 
 
