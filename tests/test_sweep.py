@@ -191,6 +191,9 @@ def test_local_workers_run_numba_single_threaded(monkeypatch):
     monkeypatch.setenv("NUMBA_NUM_THREADS", "7")  # what the workers would otherwise inherit
     with dask_client(None, 1) as client:
         assert client.submit(os.getenv, "NUMBA_NUM_THREADS").result() == "1"
+        # issue 15: the local scheduler and its dashboard listen on this machine only
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        assert "127.0.0.1" in client.dashboard_link
 
 
 @pytest.fixture(scope="module")

@@ -71,6 +71,8 @@ def _add_sweep_parser(sub) -> None:
     sw.add_argument("--scheduler", metavar="ADDRESS", help="use this running Dask cluster instead of a local one")
     sw.add_argument("--workers", type=_positive_int, default=os.cpu_count() or 1, metavar="N",
                     help="worker processes of the local cluster (default: number of CPU cores)")  # fmt: skip
+    sw.add_argument("--dashboard", default=sweep.DASHBOARD, metavar="HOST:PORT",
+                    help="the local cluster's dashboard address (default: this machine only; ':8787' opens it)")  # fmt: skip
     sw.add_argument("--plot-x", metavar="KEY", help="x of sweep.png (default: the last --set key)")
     sw.add_argument("--plot-y", metavar="KEY", help="y of sweep.png, a summary field (default: the headline result)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
@@ -185,7 +187,8 @@ def cmd_sweep(args) -> int:
     out = args.out.resolve()
     sweep.write_case_configs(cases, out)
     try:
-        results = sweep.run_cases(cases, out, args.config.resolve().parent, args.scheduler, args.workers, args.quiet)
+        results = sweep.run_cases(cases, out, args.config.resolve().parent, args.scheduler, args.workers, args.quiet,
+                                  args.dashboard)  # fmt: skip
     except (OSError, ValueError) as exc:  # no scheduler at that address, or no such address
         print(f"vemdem: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

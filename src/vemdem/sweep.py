@@ -203,8 +203,13 @@ def run_case(raw_config: dict, out_dir: str, base_dir: str) -> dict:
         return _failure(exc)
 
 
+DASHBOARD = "127.0.0.1:8787"  # the local cluster's dashboard: this machine only, unless --dashboard says otherwise
+
+
 @contextmanager
-def dask_client(scheduler: str | None, workers: int) -> Iterator[Any]:
+def dask_client(scheduler: str | None, workers: int, dashboard: str = DASHBOARD) -> Iterator[Any]:
+    """A client of the given scheduler, or of a local cluster whose scheduler and dashboard listen
+    on this machine only (`dashboard`: host:port; ":8787" opens it on every interface)."""
     # Imported here: `vemdem run` should not pay for importing Dask.
     from dask.distributed import Client, LocalCluster
 
@@ -213,7 +218,8 @@ def dask_client(scheduler: str | None, workers: int) -> Iterator[Any]:
             yield client
         return
     with (
-        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=WORKER_ENV) as cluster,
+        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=WORKER_ENV, host="127.0.0.1",
+                     dashboard_address=dashboard) as cluster,  # fmt: skip
         Client(cluster) as client,
     ):
         yield client
@@ -228,14 +234,15 @@ def _result(future) -> dict:
 
 
 def run_cases(
-    cases: list[Case], out: Path, base_dir: Path, scheduler: str | None, workers: int, quiet: bool
+    cases: list[Case], out: Path, base_dir: Path, scheduler: str | None, workers: int, quiet: bool,
+    dashboard: str = DASHBOARD,
 ) -> list[dict]:
     """Results in case order, whatever order the workers finish in."""
     from dask.distributed import as_completed
     from tqdm import tqdm
 
     results: list[dict] = [{} for _ in cases]
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, dashboard) as client:
         futures = client.map(
             run_case,
             [case.raw for case in cases],
