@@ -149,3 +149,27 @@ def test_trajectories_agree_between_the_solvers():
     assert moved > 1e-7  # they did move
     assert np.abs(x1 - x2).max() <= 1e-6 * moved
     assert np.abs(v1 - v2).max() <= 1e-6 * np.abs(v1).max()
+
+
+@pytest.mark.parametrize("dense_up_to", [10**6, 0])
+def test_coarse_correction_is_the_galerkin_projection(monkeypatch, dense_up_to):
+    """Z (Z^T K Z)^-1 Z^T r from the compiled 6 x 6 body blocks (dense LAPACK or sparse SuperLU
+    path) against the same product formed with dense matrices."""
+    from vemdem.solver.linear import grain_block
+
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", dense_up_to)
+    system = real_system(shift=3.3e6)
+    Z = rigid_modes(system.positions, system.dof_ptr // 3)
+    G = system.n_bodies
+    body = np.repeat(np.arange(G), np.diff(system.dof_ptr))
+    Zfull = np.zeros((system.n, 6 * G))
+    for a in range(6):
+        Zfull[np.arange(system.n), 6 * body + a] = Z[:, a]
+    K = system.to_csr().toarray()
+    r = np.random.default_rng(5).normal(size=system.n)
+    reference = Zfull @ np.linalg.solve(Zfull.T @ K @ Zfull, Zfull.T @ r)
+    coarse = grain_block._CoarseSpace(system)
+    assert (coarse._dense is not None) == (dense_up_to > 0)
+    # Z^T K Z cancels the stiffness of E = 90 GPa grains (rigid modes) down to the mass term, 1e-8 of
+    # it: round-off of 1e-9 relative in any order of summation
+    np.testing.assert_allclose(coarse.correction(r), reference, rtol=1e-7, atol=1e-10 * np.abs(reference).max())

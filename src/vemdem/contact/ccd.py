@@ -31,56 +31,87 @@ def surface_displacements(dx: np.ndarray, vertex_ptr: np.ndarray, n_surfaces: in
     return np.concatenate([grain_step, np.zeros(n_surfaces - len(grain_step))])
 
 
-def free_distance_ratio(disp: np.ndarray, ints: np.ndarray, floats: np.ndarray, gbar: float) -> float:
-    """Largest alpha such that moving every surface s by alpha disp[s] cannot bring two surfaces
-    into contact (conservative advancement, one global bound)."""
-    ratio = np.inf
-    if len(ints):
-        move = disp[ints[:, GRAIN_A]] + disp[ints[:, GRAIN_B]]
-        moving = move > 0
-        if moving.any():
-            ratio = float(np.min(floats[moving, GAP] / move[moving]))
-    top2 = np.sort(disp)[-2:].sum() if len(disp) > 1 else 0.0
-    if top2 > 0:
-        ratio = min(ratio, gbar / top2)
-    return ratio
+# An update moves every point of surface s by trans[s] plus at most spread[s] (trans: the common
+# translation of a grain, spread: what its rotation and deformation add); two surfaces then come
+# closer by at most |trans_a - trans_b| + spread_a + spread_b, so grains that travel together
+# (a falling or sliding cluster) do not shorten each other's updates. A plain displacement bound
+# d_s is trans = 0, spread = d_s.
+@njit(cache=True)
+def _approach(trans, spread, a, b):
+    d0, d1, d2 = trans[a, 0] - trans[b, 0], trans[a, 1] - trans[b, 1], trans[a, 2] - trans[b, 2]
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + spread[a] + spread[b]
 
 
 @njit(cache=True)
-def _pair_ratio(pairs, disp, ints, floats, gbar):
-    """min over candidate surface pairs (a, b) of D_ab / (d_a + d_b): D_ab the smallest active gap
-    of the pair, or gbar when none of its features is within the layer."""
+def _active_ratio(trans, spread, ints, floats):
+    """min over feature pairs within the layer of gap / approach."""
     ratio = np.inf
-    for k in range(len(pairs)):
-        move = disp[pairs[k, 0]] + disp[pairs[k, 1]]
-        if move > 0.0:
-            ratio = min(ratio, gbar / move)
     for c in range(len(ints)):
-        move = disp[ints[c, GRAIN_A]] + disp[ints[c, GRAIN_B]]
+        move = _approach(trans, spread, ints[c, GRAIN_A], ints[c, GRAIN_B])
         if move > 0.0:
             ratio = min(ratio, floats[c, GAP] / move)
     return ratio
 
 
-def pairwise_distance_ratio(disp: np.ndarray, moved: np.ndarray, ints: np.ndarray, floats: np.ndarray,
-                            candidates: np.ndarray, gbar: float, margin: float,
+@njit(cache=True)
+def _candidate_ratio(pairs, trans, spread, gbar):
+    """min over candidate surface pairs of gbar / approach (their distance when no feature pair is
+    active; when one is, _active_ratio is the sharper bound and is taken too)."""
+    ratio = np.inf
+    for k in range(len(pairs)):
+        move = _approach(trans, spread, pairs[k, 0], pairs[k, 1])
+        if move > 0.0:
+            ratio = min(ratio, gbar / move)
+    return ratio
+
+
+def _top2(values: np.ndarray) -> float:
+    return float(np.sort(values)[-2:].sum()) if len(values) > 1 else 0.0
+
+
+def _reach(trans: np.ndarray, spread: np.ndarray) -> np.ndarray:
+    """r_s = |trans_s - m| + spread_s with m the centre of the translations' bounding box: any two
+    surfaces approach by at most r_a + r_b (triangle inequality through m), so top2(r) bounds
+    every pair at once, and a cluster travelling together does not count its common motion."""
+    if not len(trans):
+        return spread
+    m = 0.5 * (trans.min(axis=0) + trans.max(axis=0))
+    return np.linalg.norm(trans - m, axis=1) + spread
+
+
+def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray, floats: np.ndarray,
+                        gbar: float) -> float:  # fmt: skip
+    """Largest alpha such that the update scaled by alpha cannot bring two surfaces into contact
+    (conservative advancement): active pairs keep apart when alpha approach < gap, every other
+    pair is at least gbar apart, and no two surfaces approach faster than the two fastest move."""
+    ratio = _active_ratio(trans, spread, ints, floats) if len(ints) else np.inf
+    top2 = _top2(_reach(trans, spread))
+    if top2 > 0:
+        ratio = min(ratio, gbar / top2)
+    return ratio
+
+
+def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.ndarray, ints: np.ndarray,
+                            floats: np.ndarray, candidates: np.ndarray, gbar: float, margin: float,
                             plane_distance: np.ndarray) -> float:  # fmt: skip
-    """Largest alpha such that moving every surface s by alpha disp[s] cannot bring two surfaces into
-    contact unseen, with a bound per pair instead of one for the whole scene:
-    - feature pairs within the layer (ints): alpha (d_a + d_b) < gap;
+    """free_distance_ratio with a bound per pair instead of one for the whole scene:
+    - feature pairs within the layer (ints): alpha approach < gap;
     - candidate surface pairs of the step's search: at least gbar apart when not in ints;
     - every other pair was at least gbar + margin apart at the start of the step (the search's
-      reach) and its surfaces have moved by `moved` since: alpha top2(d) < gbar + margin - top2(moved);
+      reach) and its surfaces have moved by `moved` since: alpha top2 < gbar + margin - top2(moved);
     - planes (plane_distance, (G, n_planes) distance of each grain's lowest vertex over each
-      active plane): alpha d_g < that distance.
+      active plane): alpha (|trans_g| + spread_g) < that distance.
     A grain falling fast no longer shortens the updates of every other pair (the global bound did)."""
-    ratio = _pair_ratio(np.ascontiguousarray(candidates, dtype=np.int64), disp, ints, floats, gbar)
-    top2 = np.sort(disp)[-2:].sum() if len(disp) > 1 else 0.0
+    ratio = _active_ratio(trans, spread, ints, floats) if len(ints) else np.inf
+    pairs = np.ascontiguousarray(candidates, dtype=np.int64)
+    if len(pairs):
+        ratio = min(ratio, _candidate_ratio(pairs, trans, spread, gbar))
+    top2 = _top2(_reach(trans, spread))
     if top2 > 0:
-        room = gbar + margin - (np.sort(moved)[-2:].sum() if len(moved) > 1 else 0.0)
-        ratio = min(ratio, max(room, gbar) / top2 if room > gbar else gbar / top2)
+        room = gbar + margin - _top2(moved)
+        ratio = min(ratio, max(room, 0.0) / top2)
     if plane_distance.size:
-        d = disp[: len(plane_distance)]
+        d = (np.linalg.norm(trans, axis=1) + spread)[: len(plane_distance)]
         moving = d > 0
         if moving.any():
             ratio = min(ratio, float(np.min(plane_distance[moving] / d[moving, None])))

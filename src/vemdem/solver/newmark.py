@@ -28,6 +28,7 @@ from ..contact.ccd import (
 )
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
+from ..model.motion import RigidRetraction
 from ..model.scene import Scene
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
@@ -51,6 +52,7 @@ class NewmarkParameters:
     ccd: str = "global"  # Newton update bound: "global" (one bound for all pairs) or "pairwise" (contact.ccd)
     accuracy: float = 0.0  # > 0: converged when a1 |dx| <= accuracy |g| (the step's own accuracy); 0: strict test
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
+    update: str = "rigid"  # "rigid": each grain's rigid part as a finite rotation (model.motion); "linear": x + alpha dx
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
@@ -65,24 +67,45 @@ def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
     return State(t0, x, v, a, contact.trial_history)
 
 
-def _free_distance_ratio(scene: Scene, dx, ints, floats) -> float:
-    contact = scene.contact
-    n_surfaces = len(contact.topology.grain_vertex_ptr) - 1 + len(contact.planes)
-    disp = surface_displacements(dx, scene.bodies.vertex_ptr, n_surfaces)
-    return free_distance_ratio(disp, ints, floats, contact.law.activation_gap)
+def _n_surfaces(scene: Scene) -> int:
+    return len(scene.contact.topology.grain_vertex_ptr) - 1 + len(scene.contact.planes)
 
 
-def _pairwise_ratio(scene: Scene, dx, du, x, t, ints, floats, candidates, margin) -> float:
-    """contact.ccd.pairwise_distance_ratio for a Newton update dx at x (du: the step's displacement
-    so far, for pairs outside the step's search)."""
+
+
+class _UpdatePath:
+    """One Newton update dx at x: `at(alpha)` the positions after alpha of it, and every surface's
+    motion bound at alpha = 1 as contact.ccd wants it (trans, spread; walls: 0)."""
+
+    def __init__(self, scene: Scene, x, dx, update: str):
+        vptr = scene.bodies.vertex_ptr
+        n_walls = _n_surfaces(scene) - scene.bodies.n_bodies
+        if update == "linear":
+            self.at = lambda alpha: x + alpha * dx
+            spread = surface_displacements(dx, vptr, scene.bodies.n_bodies)
+            trans = np.zeros((len(spread), 3))
+        else:
+            move = RigidRetraction(x, dx, scene.bodies.lumped, vptr)
+            self.at = move.at
+            spread = move.bounds - np.linalg.norm(move.t, axis=1)
+            trans = move.t
+        self.trans = np.concatenate([trans, np.zeros((n_walls, 3))])
+        self.spread = np.concatenate([spread, np.zeros(n_walls)])
+
+
+def _ccd_ratio(scene: Scene, path: _UpdatePath, mode: str, ints, floats, du, x, t, candidates, margin) -> float:
+    """contact.ccd's bound on the share of an update that keeps every pair apart: one bound for
+    the scene ("global") or one per pair ("pairwise"; du: the step's displacement so far, for
+    pairs outside the step's search)."""
     contact = scene.contact
+    gbar = contact.law.activation_gap
+    if mode != "pairwise":
+        return free_distance_ratio(path.trans, path.spread, ints, floats, gbar)
     vptr = scene.bodies.vertex_ptr
-    n_surfaces = len(contact.topology.grain_vertex_ptr) - 1 + len(contact.planes)
-    disp = surface_displacements(dx, vptr, n_surfaces)
-    moved = surface_displacements(du, vptr, n_surfaces)
+    moved = surface_displacements(du, vptr, _n_surfaces(scene))
     planes = [p for p in contact.planes if p.motion.active(t)]
     dist = np.column_stack([plane_distances(x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
-    return pairwise_distance_ratio(disp, moved, ints, floats, candidates, contact.law.activation_gap, margin, dist)
+    return pairwise_distance_ratio(path.trans, path.spread, moved, ints, floats, candidates, gbar, margin, dist)
 
 
 def newton_blocks(scene: Scene, el, cr, mass_shift: float):
@@ -126,7 +149,7 @@ class _IncrementalPotential:
         r = x.ravel() - self.x_tilde
         return 0.5 * self.a1 * float(r @ (self.M @ r)) + strain_energy + contact_energy - float(self.f_grav @ x.ravel())
 
-    def backtrack(self, x, dx, alpha, e0, slope, halvings: int = 6) -> float:
+    def backtrack(self, moved, alpha, e0, slope, halvings: int = 6) -> float:
         """Largest alpha 2^-k with an Armijo decrease; alpha itself when the direction does not
         descend (dissipative terms dominate) or no trial decreases E (round-off near convergence)."""
         if not slope < 0:
@@ -134,7 +157,7 @@ class _IncrementalPotential:
         trial = alpha
         for _ in range(halvings):
             try:
-                e = self.value(x + trial * dx)
+                e = self.value(moved(trial))
             except (InvertedElementError, PenetrationError):
                 e = np.inf
             if e <= e0 + 1e-4 * trial * slope:
@@ -159,11 +182,13 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     if params.predictor == "acceleration":
         guess = state.v * dt + 0.5 * dt * dt * state.a
         _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
-        alpha0 = min(1.0, params.ccd_fraction * _free_distance_ratio(scene, guess, ints0, floats0))
-        x = x + alpha0 * guess
+        path = _UpdatePath(scene, x, guess, params.update)
+        ratio = _ccd_ratio(scene, path, params.ccd, ints0, floats0, guess * 0, x, t1, candidates, 2.0 * travel)
+        x = path.at(min(1.0, params.ccd_fraction * ratio))
     size = float(np.cbrt(scene.bodies.volume.mean()))
     linear = params.linear if params.linear is not None else _default_linear()
     krylov = 0
+    full_before, dx_before = False, np.inf
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
@@ -183,15 +208,13 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         linear.factor(NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x))
         dx = -linear.solve(R, params.krylov_rtol).reshape(-1, 3)
         krylov += linear.stats.last_iterations
-        if params.ccd == "pairwise":
-            ratio = _pairwise_ratio(scene, dx, du, x, t1, cr.ints, cr.floats, candidates, 2.0 * travel)
-        else:
-            ratio = _free_distance_ratio(scene, dx, cr.ints, cr.floats)
+        path = _UpdatePath(scene, x, dx, params.update)
+        ratio = _ccd_ratio(scene, path, params.ccd, cr.ints, cr.floats, du, x, t1, candidates, 2.0 * travel)
         alpha = min(1.0, params.ccd_fraction * ratio)
         if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
-            alpha = merit.backtrack(x, dx, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
-        x = x + alpha * dx
+            alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
+        x = path.at(alpha)
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
         # the step's displacement (quadratic convergence) also ends the iteration.
@@ -200,11 +223,19 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         if params.accuracy > 0:
             dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         small_r = np.abs(R).max() <= r_tol
-        small_dx = np.abs(dx).max() <= dx_tol
+        dx_norm = np.abs(dx).max()
+        # Newton converging quadratically leaves an error of about |dx_k|^2 / |dx_k-1| after a full
+        # update (the linear-rate estimate, larger than the quadratic one): when that is below the
+        # tolerance the next iteration would only confirm it. Trusted only once the residual is
+        # near its round-off floor (a few tolerances), where the iteration is quadratic.
+        small_dx = dx_norm <= dx_tol or (
+            full_before and dx_norm * dx_norm <= dx_tol * dx_before and np.abs(R).max() <= 1e3 * r_tol
+        )
         if params.trace is not None:
-            params.trace(it, np.abs(R).max() / r_tol, np.abs(dx).max() / dx_tol, alpha, cr)
+            params.trace(it, np.abs(R).max() / r_tol, dx_norm / dx_tol, alpha, cr)
         if alpha == 1.0 and small_dx and (small_r or it > 1):
             break
+        full_before, dx_before = alpha == 1.0, dx_norm
     else:
         raise StepRejected(f"Newton did not converge in {params.max_iterations} iterations")
     du = x - state.x

@@ -11,6 +11,22 @@ from .direct import DENSE_LIMIT, DirectSolver, pypardiso, solve, sparse_backend
 from .grain_block import GrainBlockSolver, rigid_modes
 
 NAMES = ("auto", "direct", "grain-block")
+
+_BLAS_LIMIT = []
+
+
+def single_threaded_blas() -> None:
+    """Run BLAS/LAPACK on one thread from now on, once per process. The Newton loop alternates
+    compiled parallel kernels (numba's threads) with small LAPACK calls; OpenBLAS's own threads
+    keep spinning between calls and take the cores from numba's: a 64-grain implicit slump ran 4x
+    slower (10.1 s against 2.5 s, docs/linear-solvers.md). Our dense problems are small (a
+    grain's block, the coarse matrix of a few hundred unknowns), so one thread loses nothing."""
+    if not _BLAS_LIMIT:
+        from threadpoolctl import threadpool_limits
+
+        _BLAS_LIMIT.append(threadpool_limits(limits=1, user_api="blas"))
+
+
 class AutoSolver:
     """Picks direct (dense LU) or grain-block per system by its size (the measured crossover)."""
 
@@ -30,6 +46,7 @@ class AutoSolver:
 
 
 def make_linear_solver(name: str = "auto") -> LinearSolver:
+    single_threaded_blas()
     if name == "direct":
         return DirectSolver()
     if name == "grain-block":
@@ -51,6 +68,7 @@ __all__ = [
     "SingularSystemError",
     "SolverStats",
     "make_linear_solver",
+    "single_threaded_blas",
     "pypardiso",
     "rigid_modes",
     "solve",
