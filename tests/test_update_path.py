@@ -148,9 +148,63 @@ def test_newton_on_a_spinning_grain_needs_fewer_iterations_and_reaches_the_same_
     scene, state = spinning_grain(100.0)  # 0.14 rad per step of 1e-3 s (the straight update: 13 iterations)
     results = {}
     for update in ("linear", "rigid"):
-        params = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("direct"), update=update)
+        params = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("direct"), update=update, stall_share=1.0)
         new, info = newmark_step(scene, state, 1e-3, params)
         results[update] = (new.x, info.iterations)
     (x_lin, it_lin), (x_rig, it_rig) = results["linear"], results["rigid"]
     assert it_rig <= it_lin - 3
     assert np.abs(x_rig - x_lin).max() < 1e-12
+
+
+def ipctk_pair_distance(kind, xs, plane_face=False):
+    """The pair's feature distance from ipctk (the oracle of accd_alpha's own distances)."""
+    if kind == 0:
+        return np.sqrt(ipctk.point_triangle_distance(*xs[:4]))
+    if kind == 1:
+        return np.sqrt(ipctk.edge_edge_distance(*xs[:4]))
+    if kind == 2:
+        return np.sqrt(ipctk.point_edge_distance(*xs[:3]))
+    return float(np.linalg.norm(xs[0] - xs[1]))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_additive_ccd_keeps_every_active_pair_apart_and_lets_sliding_pass(seed):
+    """Two sand grains a third of an activation gap apart; the upper one slides sideways and
+    spins (an update far larger than the gap, nearly parallel to the contact): additive CCD lets
+    most of it through where the bound from the start alone allowed a sliver, and every active
+    pair keeps at least 1 - 0.8 of its distance along the whole path (ipctk distances)."""
+    from vemdem.contact.ccd import accd_alpha
+    from vemdem.contact.narrow import N_NODES
+    from vemdem.contact.pairs import GAP, KIND, NODE0
+
+    rng = np.random.default_rng(seed)
+    material = Material(90e9, 0.16, 2200.0)
+    law, friction = default_contact_laws(1e-3, material.E, material.density)
+    a = sand_grain(1e-3, 18, seed=10 + seed)
+    b = sand_grain(1e-3, 18, seed=20 + seed)
+    b = b.translated((0.0, 0.0, a.vertices[:, 2].max() - b.vertices[:, 2].min() + 1e-3))
+    scene = Scene.build([a, b], material, law, friction, planes=[], gravity=(0, 0, -9.81))
+    contact, x = scene.contact, scene.bodies.reference.copy()
+    # lower b until its closest pair is a third of the activation gap away
+    for _ in range(40):
+        _, ints, floats = contact.pairs(x, 0.0, contact.search(x, 0.0, margin=2e-3), reach=2e-3)
+        x[scene.bodies.vertex_ptr[1] :, 2] -= floats[:, GAP].min() - law.activation_gap / 3
+    _, ints, floats = contact.pairs(x, 0.0, contact.search(x, 0.0))
+    assert len(ints) >= 1
+    nb = scene.bodies.vertex_ptr[1]
+    dx = np.zeros_like(x)
+    dx[nb:, :2] = rng.normal(size=2) * 5e-5  # ~15 activation gaps sideways
+    dx[nb:] += np.cross(np.array([0.0, 0.0, 0.02]), x[nb:] - x[nb:].mean(axis=0))
+    move = RigidRetraction(x, dx, scene.bodies.lumped, scene.bodies.vertex_ptr)
+    x_all = contact.all_positions(x, 0.0)
+    alpha = accd_alpha(ints, x_all, len(x), contact.plane_node0, dx, contact.topology.vertex_grain,
+                       move.c, move.t, move.phi, move.excess(), 0.2, 1.0)  # fmt: skip
+    spread = move.bounds - np.linalg.norm(move.t, axis=1)
+    start_only = 0.8 * free_distance_ratio(move.t, spread, ints, floats, law.activation_gap)
+    assert alpha > 5 * start_only
+    d0 = [ipctk_pair_distance(k, x_all[ints[c, NODE0 : NODE0 + N_NODES[k]]]) for c, k in enumerate(ints[:, KIND])]
+    for s in np.linspace(0.0, alpha, 25)[1:]:
+        y = move.at(s)
+        for c, k in enumerate(ints[:, KIND]):
+            d = ipctk_pair_distance(k, y[ints[c, NODE0 : NODE0 + N_NODES[k]]])
+            assert d >= 0.2 * d0[c] * (1 - 1e-9)

@@ -133,6 +133,10 @@ SOLVER = {
     "entry_fraction": Field(
         float, 0.05, _in(0, 1, lo_open=True), "implicit: share of the activation gap an approaching pair may close per step"
     ),
+    "energy_growth": Field(
+        float, 1e-3, non_negative,
+        "implicit: a step that raises the total energy by more than this share of sum m g d is halved (0: off)",
+    ),
     "safety": Field(float, 0.5, _in(0, 1, lo_open=True), "explicit: share of the critical step taken"),
     "mass_damping": Field(float, 0.0, non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
     "mass_scaling": Field(

@@ -21,7 +21,8 @@ from numba import njit
 
 from .forces import pair_inverse_masses
 from .law import normal_stiffness
-from .pairs import GAP, GRAIN_A, GRAIN_B, find_contacts
+from .narrow import EDGE_EDGE, N_NODES, VERTEX_EDGE, VERTEX_FACE, edge_edge_closest, point_triangle_closest, vertex_edge_lcp
+from .pairs import GAP, GRAIN_A, GRAIN_B, KIND, NODE0, find_contacts
 
 
 def surface_displacements(dx: np.ndarray, vertex_ptr: np.ndarray, n_surfaces: int) -> np.ndarray:
@@ -43,14 +44,155 @@ def _approach(trans, spread, a, b):
 
 
 @njit(cache=True)
-def _active_ratio(trans, spread, ints, floats):
-    """min over feature pairs within the layer of gap / approach."""
+def _node_approach(ints, c, node_disp, node_extra):
+    """How much closer the pair's own features can come: the distance from a point to a triangle
+    (or between segments) falls by at most the largest relative displacement of a node of one
+    side and a node of the other, max |u_p - u_q| <= |dx_p - dx_q| + e_p + e_q (e: what the
+    update's path adds to alpha dx, per vertex; nodes past node_disp are walls: fixed)."""
+    kind = ints[c, KIND]
+    n_a = 2 if kind == EDGE_EDGE else 1
+    n_vertices = len(node_disp)
+    move = 0.0
+    for i in range(n_a):
+        p = ints[c, NODE0 + i]
+        for j in range(n_a, N_NODES[kind]):
+            q = ints[c, NODE0 + j]
+            d2 = 0.0
+            e = 0.0
+            for k in range(3):
+                up = node_disp[p, k] if p < n_vertices else 0.0
+                uq = node_disp[q, k] if q < n_vertices else 0.0
+                d2 += (up - uq) ** 2
+            if p < n_vertices:
+                e += node_extra[p]
+            if q < n_vertices:
+                e += node_extra[q]
+            move = max(move, np.sqrt(d2) + e)
+    return move
+
+
+@njit(cache=True)
+def _active_ratio(trans, spread, ints, floats, node_disp, node_extra):
+    """min over feature pairs within the layer of gap / approach, the approach the smaller of the
+    surfaces' bound and the pair's own nodes' (a grain pivoting on a vertex barely moves it)."""
     ratio = np.inf
     for c in range(len(ints)):
         move = _approach(trans, spread, ints[c, GRAIN_A], ints[c, GRAIN_B])
+        if len(node_disp):
+            move = min(move, _node_approach(ints, c, node_disp, node_extra))
         if move > 0.0:
             ratio = min(ratio, floats[c, GAP] / move)
     return ratio
+
+
+_NO_NODES = (np.zeros((0, 3)), np.zeros(0))
+
+
+# ------------------------------------------------------------------ additive CCD of active pairs
+# A bound from the start of the update alone (gap / approach) stops a pair whose features slide
+# along each other at a small gap: the relative motion of its nodes is large, the distance barely
+# changes. Additive CCD (Li et al. 2021, the IPC Toolkit's default) advances alpha by what the
+# bound allows from the distance measured at the current alpha, and measures again.
+@njit(cache=True)
+def _path_point(i, alpha, x_all, n_vertices, dx, vertex_grain, c, t, phi, out):
+    """Position of node i after alpha of the update: grain vertices on their grain's rigid path
+    (model/motion.py; t = phi = 0 and c = 0 give x + alpha dx), wall nodes fixed."""
+    if i >= n_vertices:
+        for k in range(3):
+            out[k] = x_all[i, k]
+        return
+    g = vertex_grain[i]
+    p0, p1, p2 = alpha * phi[g, 0], alpha * phi[g, 1], alpha * phi[g, 2]
+    r0, r1, r2 = x_all[i, 0] - c[g, 0], x_all[i, 1] - c[g, 1], x_all[i, 2] - c[g, 2]
+    f0, f1, f2 = phi[g, 0], phi[g, 1], phi[g, 2]
+    d0 = dx[i, 0] - t[g, 0] - (f1 * r2 - f2 * r1)
+    d1 = dx[i, 1] - t[g, 1] - (f2 * r0 - f0 * r2)
+    d2 = dx[i, 2] - t[g, 2] - (f0 * r1 - f1 * r0)
+    q0, q1, q2 = r0 + alpha * d0, r1 + alpha * d1, r2 + alpha * d2
+    th = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    if th > 1e-300:
+        k0, k1, k2 = p0 / th, p1 / th, p2 / th
+        co, si = np.cos(th), np.sin(th)
+        kq = k0 * q0 + k1 * q1 + k2 * q2
+        x0, x1, x2 = k1 * q2 - k2 * q1, k2 * q0 - k0 * q2, k0 * q1 - k1 * q0
+        q0, q1, q2 = q0 * co + x0 * si + k0 * kq * (1 - co), q1 * co + x1 * si + k1 * kq * (1 - co), q2 * co + x2 * si + k2 * kq * (1 - co)
+    out[0] = c[g, 0] + alpha * t[g, 0] + q0
+    out[1] = c[g, 1] + alpha * t[g, 1] + q1
+    out[2] = c[g, 2] + alpha * t[g, 2] + q2
+
+
+@njit(cache=True)
+def _pair_distance(kind, xs, plane):
+    """Distance of the pair's features: point-triangle, segment-segment, point-segment,
+    point-point; a wall plane's vertex-face pair: the distance to the plane."""
+    if kind == VERTEX_FACE:
+        if plane:
+            n = np.cross(xs[2] - xs[1], xs[3] - xs[1])
+            return abs(np.dot(xs[0] - xs[1], n)) / np.sqrt(np.dot(n, n))
+        return point_triangle_closest(xs[0], xs[1], xs[2], xs[3])[1]
+    if kind == EDGE_EDGE:
+        return edge_edge_closest(xs[0], xs[1], xs[2], xs[3])[1]
+    if kind == VERTEX_EDGE:
+        best = min(np.sqrt(np.sum((xs[0] - xs[1]) ** 2)), np.sqrt(np.sum((xs[0] - xs[2]) ** 2)))
+        ok, u = vertex_edge_lcp(xs[0], xs[1], xs[2])
+        if ok:
+            best = min(best, np.sqrt(np.sum((xs[0] - (1.0 - u) * xs[1] - u * xs[2]) ** 2)))
+        return best
+    return np.sqrt(np.sum((xs[0] - xs[1]) ** 2))
+
+
+@njit(cache=True)
+def accd_alpha(ints, x_all, n_vertices, plane_node0, dx, vertex_grain, c, t, phi, excess, keep, cap,
+               max_rounds=64):  # fmt: skip
+    """Largest alpha <= cap (found by additive CCD) such that every pair in ints stays at least
+    keep times its distance at alpha = 0 apart along the update's path. Between measurements,
+    the distance falls at most at the rate L = max over a node p of one side and q of the other
+    of |dx_p - dx_q| + 2 (e_p + e_q) (e: model.motion.path_excess, which also bounds half the
+    path's departure from its tangent in rate)."""
+    alpha_min = cap
+    xs = np.empty((4, 3))
+    for c_ in range(len(ints)):
+        kind = ints[c_, KIND]
+        nn = N_NODES[kind]
+        n_a = 2 if kind == EDGE_EDGE else 1
+        plane = kind == VERTEX_FACE and ints[c_, NODE0 + 1] >= plane_node0
+        rate = 0.0
+        for i in range(n_a):
+            p = ints[c_, NODE0 + i]
+            for j in range(n_a, nn):
+                q = ints[c_, NODE0 + j]
+                d2 = 0.0
+                e = 0.0
+                for k in range(3):
+                    up = dx[p, k] if p < n_vertices else 0.0
+                    uq = dx[q, k] if q < n_vertices else 0.0
+                    d2 += (up - uq) ** 2
+                if p < n_vertices:
+                    e += excess[p]
+                if q < n_vertices:
+                    e += excess[q]
+                rate = max(rate, np.sqrt(d2) + 2.0 * e)
+        if rate <= 0.0:
+            continue
+        for k in range(nn):
+            for a in range(3):
+                xs[k, a] = x_all[ints[c_, NODE0 + k], a]
+        d0 = _pair_distance(kind, xs[:nn], plane)
+        floor = keep * d0
+        alpha, d = 0.0, d0
+        for _ in range(max_rounds):
+            step = (d - floor) / rate
+            if alpha + step >= alpha_min:  # this pair does not bind below the current minimum
+                alpha = alpha_min
+                break
+            alpha += step
+            for k in range(nn):
+                _path_point(ints[c_, NODE0 + k], alpha, x_all, n_vertices, dx, vertex_grain, c, t, phi, xs[k])
+            d = _pair_distance(kind, xs[:nn], plane)
+            if d - floor <= 1e-3 * (d0 - floor):  # closing in: alpha is where it reaches the floor
+                break
+        alpha_min = min(alpha_min, alpha)
+    return alpha_min
 
 
 @njit(cache=True)
@@ -80,11 +222,12 @@ def _reach(trans: np.ndarray, spread: np.ndarray) -> np.ndarray:
 
 
 def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray, floats: np.ndarray,
-                        gbar: float) -> float:  # fmt: skip
+                        gbar: float, nodes=_NO_NODES) -> float:  # fmt: skip
     """Largest alpha such that the update scaled by alpha cannot bring two surfaces into contact
     (conservative advancement): active pairs keep apart when alpha approach < gap, every other
-    pair is at least gbar apart, and no two surfaces approach faster than the two fastest move."""
-    ratio = _active_ratio(trans, spread, ints, floats) if len(ints) else np.inf
+    pair is at least gbar apart, and no two surfaces approach faster than the two fastest move.
+    nodes: (dx, e) of every grain vertex, for the pairs' own bound (_node_approach)."""
+    ratio = _active_ratio(trans, spread, ints, floats, *nodes) if len(ints) else np.inf
     top2 = _top2(_reach(trans, spread))
     if top2 > 0:
         ratio = min(ratio, gbar / top2)
@@ -93,7 +236,7 @@ def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray,
 
 def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.ndarray, ints: np.ndarray,
                             floats: np.ndarray, candidates: np.ndarray, gbar: float, margin: float,
-                            plane_distance: np.ndarray) -> float:  # fmt: skip
+                            plane_distance: np.ndarray, nodes=_NO_NODES) -> float:  # fmt: skip
     """free_distance_ratio with a bound per pair instead of one for the whole scene:
     - feature pairs within the layer (ints): alpha approach < gap;
     - candidate surface pairs of the step's search: at least gbar apart when not in ints;
@@ -102,7 +245,7 @@ def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.nda
     - planes (plane_distance, (G, n_planes) distance of each grain's lowest vertex over each
       active plane): alpha (|trans_g| + spread_g) < that distance.
     A grain falling fast no longer shortens the updates of every other pair (the global bound did)."""
-    ratio = _active_ratio(trans, spread, ints, floats) if len(ints) else np.inf
+    ratio = _active_ratio(trans, spread, ints, floats, *nodes) if len(ints) else np.inf
     pairs = np.ascontiguousarray(candidates, dtype=np.int64)
     if len(pairs):
         ratio = min(ratio, _candidate_ratio(pairs, trans, spread, gbar))

@@ -15,7 +15,8 @@ and the grain is moved along the curve x_i(alpha) = c + alpha t + Q(alpha phi) (
 Q the rotation of vector alpha phi (Rodrigues). It agrees with x + alpha dx to first order in
 alpha dx, so Newton's fixed point and its quadratic convergence are those of the plain update.
 Every point of a grain's surface (a convex combination of its vertices) moves by at most
-alpha (|t| + |phi| max|r_i| + max|d_i|): the bound conservative advancement uses.
+alpha (|t| + |phi| max|r_i| + max|d_i|), and each vertex departs from x_i + alpha dx_i by at most
+alpha e_i (path_excess): the bounds conservative advancement uses.
 """
 
 from __future__ import annotations
@@ -112,6 +113,26 @@ def move_rigidly(x, dx, vertex_ptr, c, t, phi, alpha):
     return out
 
 
+@njit(cache=True, parallel=True)
+def path_excess(x, dx, vertex_ptr, c, t, phi):
+    """Per vertex, e_i with |x_i(alpha) - x_i - alpha dx_i| <= alpha e_i for alpha <= 1:
+    (1 - cos th) <= th^2 / 2 and |sin th - th| <= th^3 / 6 give the rotation's departure from its
+    tangent, |Q d - d| <= th |d| the rotated deformation's:
+        e_i = |phi|^2 |r_i| (1/2 + |phi| / 6) + |phi| |d_i|"""
+    out = np.empty(len(x))
+    for g in prange(len(vertex_ptr) - 1):
+        p = phi[g]
+        th = np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2)
+        for i in range(vertex_ptr[g], vertex_ptr[g + 1]):
+            r = x[i] - c[g]
+            d0 = dx[i, 0] - t[g, 0] - (p[1] * r[2] - p[2] * r[1])
+            d1 = dx[i, 1] - t[g, 1] - (p[2] * r[0] - p[0] * r[2])
+            d2 = dx[i, 2] - t[g, 2] - (p[0] * r[1] - p[1] * r[0])
+            rn = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+            out[i] = th * th * rn * (0.5 + th / 6.0) + th * np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return out
+
+
 class RigidRetraction:
     """One Newton update dx at x, split once; `at(alpha)` moves the grains along it and `bounds`
     are the surface displacement bounds of alpha = 1 (conservative advancement)."""
@@ -119,6 +140,10 @@ class RigidRetraction:
     def __init__(self, x: np.ndarray, dx: np.ndarray, weights: np.ndarray, vertex_ptr: np.ndarray):
         self.x, self.dx, self.vertex_ptr = x, dx, vertex_ptr
         self.c, self.t, self.phi, self.bounds = rigid_split(x, dx, weights, vertex_ptr)
+
+    def excess(self) -> np.ndarray:
+        """path_excess of this update (per vertex)."""
+        return path_excess(self.x, self.dx, self.vertex_ptr, self.c, self.t, self.phi)
 
     def at(self, alpha: float) -> np.ndarray:
         return move_rigidly(self.x, self.dx, self.vertex_ptr, self.c, self.t, self.phi, float(alpha))

@@ -26,6 +26,8 @@ EXAMPLES = {
     "paper-collapse-low": "paper-collapse-low.toml",
     "paper-compression": "paper-compression.toml",
 }
+# the paper's own method at the real density (issue 14): the same runs, implicit, no mass scaling
+EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
 
 
 def scenario_module(name):

@@ -35,6 +35,7 @@ class SolverOptions:
     max_iterations: int = 15
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
+    energy_growth: float = 1e-3
     safety: float = 0.5
     mass_damping: float = 0.0
     linear: str = "auto"  # implicit: linear solver of the Newton systems (solver/linear/)
@@ -97,7 +98,7 @@ class ExplicitCentral:
 
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
-                       entry_fraction=o.entry_fraction)  # fmt: skip
+                       entry_fraction=o.entry_fraction, energy_growth=o.energy_growth)  # fmt: skip
 
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..contact.ccd import (
+    accd_alpha,
     free_distance_ratio,
     impact_step_limit,
     missed_pairs,
@@ -33,7 +34,7 @@ from ..model.scene import Scene
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
-__all__ = ["NewmarkParameters", "advance", "initial_state", "newmark_step", "step_limit"]
+__all__ = ["NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
 
 
 @dataclass
@@ -53,6 +54,7 @@ class NewmarkParameters:
     accuracy: float = 0.0  # > 0: converged when a1 |dx| <= accuracy |g| (the step's own accuracy); 0: strict test
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
     update: str = "rigid"  # "rigid": each grain's rigid part as a finite rotation (model.motion); "linear": x + alpha dx
+    stall_share: float = 0.5  # share of a full update taken when Newton stalls or cycles (from the 4th iteration)
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
@@ -74,38 +76,53 @@ def _n_surfaces(scene: Scene) -> int:
 
 
 class _UpdatePath:
-    """One Newton update dx at x: `at(alpha)` the positions after alpha of it, and every surface's
-    motion bound at alpha = 1 as contact.ccd wants it (trans, spread; walls: 0)."""
+    """One Newton update dx at x: `at(alpha)` the positions after alpha of it, and what contact.ccd
+    needs to bound it: every surface's motion (trans, spread; walls: 0) and each grain's path
+    (centroid c, translation t, rotation phi; all 0 for the straight update) with its per-vertex
+    excess over x + alpha dx."""
 
     def __init__(self, scene: Scene, x, dx, update: str):
         vptr = scene.bodies.vertex_ptr
-        n_walls = _n_surfaces(scene) - scene.bodies.n_bodies
+        G = scene.bodies.n_bodies
+        n_walls = _n_surfaces(scene) - G
+        self.x, self.dx = x, np.ascontiguousarray(dx)
         if update == "linear":
             self.at = lambda alpha: x + alpha * dx
-            spread = surface_displacements(dx, vptr, scene.bodies.n_bodies)
-            trans = np.zeros((len(spread), 3))
+            spread = surface_displacements(dx, vptr, G)
+            self.c = self.t = self.phi = np.zeros((G, 3))
+            self.excess = np.zeros(len(dx))
         else:
             move = RigidRetraction(x, dx, scene.bodies.lumped, vptr)
             self.at = move.at
             spread = move.bounds - np.linalg.norm(move.t, axis=1)
-            trans = move.t
-        self.trans = np.concatenate([trans, np.zeros((n_walls, 3))])
+            self.c, self.t, self.phi = move.c, move.t, move.phi
+            self.excess = move.excess()
+        self.trans = np.concatenate([self.t, np.zeros((n_walls, 3))])
         self.spread = np.concatenate([spread, np.zeros(n_walls)])
 
 
-def _ccd_ratio(scene: Scene, path: _UpdatePath, mode: str, ints, floats, du, x, t, candidates, margin) -> float:
-    """contact.ccd's bound on the share of an update that keeps every pair apart: one bound for
-    the scene ("global") or one per pair ("pairwise"; du: the step's displacement so far, for
-    pairs outside the step's search)."""
+def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, candidates, margin) -> float:
+    """The share alpha <= 1 of an update that keeps every pair apart: pairs within the layer by
+    additive CCD along the update's path (each keeps 1 - ccd_fraction of its distance), all
+    others by contact.ccd's bound from the start, one for the scene ("global") or one per pair
+    ("pairwise"; du: the step's displacement so far, for pairs outside the step's search)."""
     contact = scene.contact
     gbar = contact.law.activation_gap
-    if mode != "pairwise":
-        return free_distance_ratio(path.trans, path.spread, ints, floats, gbar)
-    vptr = scene.bodies.vertex_ptr
-    moved = surface_displacements(du, vptr, _n_surfaces(scene))
-    planes = [p for p in contact.planes if p.motion.active(t)]
-    dist = np.column_stack([plane_distances(x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
-    return pairwise_distance_ratio(path.trans, path.spread, moved, ints, floats, candidates, gbar, margin, dist)
+    none = ints[:0], floats[:0]  # the pairs within the layer are left to the additive CCD below
+    if params.ccd != "pairwise":
+        ratio = free_distance_ratio(path.trans, path.spread, *none, gbar)
+    else:
+        vptr = scene.bodies.vertex_ptr
+        moved = surface_displacements(du, vptr, _n_surfaces(scene))
+        planes = [p for p in contact.planes if p.motion.active(t)]
+        dist = np.column_stack([plane_distances(path.x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
+        ratio = pairwise_distance_ratio(path.trans, path.spread, moved, *none, candidates, gbar, margin, dist)
+    alpha = min(1.0, params.ccd_fraction * ratio)
+    if len(ints):
+        x_all = contact.all_positions(path.x, t)
+        alpha = accd_alpha(ints, x_all, len(path.x), contact.plane_node0, path.dx, contact.topology.vertex_grain,
+                           path.c, path.t, path.phi, path.excess, 1.0 - params.ccd_fraction, alpha)  # fmt: skip
+    return alpha
 
 
 def newton_blocks(scene: Scene, el, cr, mass_shift: float):
@@ -183,12 +200,12 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         guess = state.v * dt + 0.5 * dt * dt * state.a
         _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
-        ratio = _ccd_ratio(scene, path, params.ccd, ints0, floats0, guess * 0, x, t1, candidates, 2.0 * travel)
-        x = path.at(min(1.0, params.ccd_fraction * ratio))
+        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, 2.0 * travel))
     size = float(np.cbrt(scene.bodies.volume.mean()))
     linear = params.linear if params.linear is not None else _default_linear()
     krylov = 0
     full_before, dx_before = False, np.inf
+    corrections = []
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
@@ -209,8 +226,19 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         dx = -linear.solve(R, params.krylov_rtol).reshape(-1, 3)
         krylov += linear.stats.last_iterations
         path = _UpdatePath(scene, x, dx, params.update)
-        ratio = _ccd_ratio(scene, path, params.ccd, cr.ints, cr.floats, du, x, t1, candidates, 2.0 * travel)
-        alpha = min(1.0, params.ccd_fraction * ratio)
+        alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, t1, candidates, 2.0 * travel)
+        # A pair that changes type or eligibility between iterations (a vertex crossing a face's
+        # edge) changes the tangent discontinuously, and full updates can cycle between two states
+        # (seen in a twelve-grain drop: the same |dx| every other iteration, never converging).
+        # A full update that has not halved the correction of two iterations before is shortened.
+        dx_norm = np.abs(dx).max()
+        r_tol = params.rtol * scale
+        dx_tol = params.xtol * max(np.abs(du).max(), 1e-6 * size)
+        if params.accuracy > 0:
+            dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
+        if it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2], dx_tol):
+            alpha = params.stall_share
+        corrections.append(dx_norm)
         if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
@@ -218,12 +246,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
         # the step's displacement (quadratic convergence) also ends the iteration.
-        r_tol = params.rtol * scale
-        dx_tol = params.xtol * max(np.abs(du).max(), 1e-6 * size)
-        if params.accuracy > 0:
-            dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         small_r = np.abs(R).max() <= r_tol
-        dx_norm = np.abs(dx).max()
         # Newton converging quadratically leaves an error of about |dx_k|^2 / |dx_k-1| after a full
         # update (the linear-rate estimate, larger than the quadratic one): when that is below the
         # tolerance the next iteration would only confirm it. Trusted only once the residual is
@@ -268,15 +291,52 @@ def step_limit(scene: Scene, state: State, control: StepControl) -> float:
     return max(limit, 10.0 * control.dt_min)
 
 
+def total_energy(scene: Scene, state: State, strain_energy: float, contact_energy: float) -> float:
+    """Kinetic + gravity + strain + contact potential + what damping and friction dissipated: constant
+    in a closed system, and the integrator's own (numerical) dissipation can only lower it."""
+    return (scene.kinetic_energy(state.v) + scene.gravity_energy(state.x) + strain_energy + contact_energy
+            + state.dissipated)  # fmt: skip
+
+
+def _energy_of(scene: Scene, state: State) -> float:
+    strain = scene.bodies.evaluate(state.x, force=False).total_energy
+    contact = scene.contact.potential(state.x, state.t, scene.contact.search(state.x, state.t))
+    return total_energy(scene, state, strain, contact)
+
+
+def energy_tolerance(scene: Scene, control: StepControl) -> float:
+    """Largest energy gain a step may make: control.energy_growth times sum m g d (the work of
+    lifting every grain by its own size); 0 turns the check off."""
+    g = max(float(np.linalg.norm(scene.gravity)), 9.81)
+    return control.energy_growth * scene.total_mass() * g * scene.grain_size
+
+
 def advance(scene: Scene, state: State, t_end: float, control: StepControl, params: NewmarkParameters,
             on_step=None, stats: RunStats | None = None) -> tuple[State, RunStats]:  # fmt: skip
-    """Integrate from state.t to t_end; on_step(state, info, dt) after each accepted step."""
+    """Integrate from state.t to t_end; on_step(state, info, dt) after each accepted step.
+
+    A step is rejected (and halved) when Newton fails, and also when the scene's total energy grew
+    by more than energy_tolerance while no wall moves: Newmark's trapezoidal rule does not conserve
+    the energy of the strongly nonlinear barrier law over a step that jumps deep into the layer
+    (docs/dynamics.md), and a closed system must never gain energy. Below 1e-3 dt_max the check
+    gives way (a step is then accepted, and counted in stats.energy_gains)."""
     stats = stats or RunStats()
     limit = step_limit(scene, state, control)
+    tolerance = energy_tolerance(scene, control)
+    energy = _energy_of(scene, state) if tolerance > 0 else 0.0
     while state.t < t_end * (1 - 1e-12):
         h = min(control.dt, limit, t_end - state.t)
         try:
             new, info = newmark_step(scene, state, h, params)
+            if tolerance > 0:
+                new_energy = total_energy(scene, new, info.strain_energy, info.contact_energy)
+                closed = scene.contact.max_wall_speed(state.t) == 0 and scene.contact.max_wall_speed(new.t) == 0
+                gain = new_energy - energy
+                if closed and gain > tolerance:
+                    if h > 1e-3 * control.dt_max:
+                        raise StepRejected(f"the total energy grew by {gain:.3g} J in one step (tolerance {tolerance:.3g} J)")
+                    stats.energy_gains += 1
+                energy = new_energy
         except (StepRejected, np.linalg.LinAlgError) as exc:
             stats.rejected += 1
             stats.last_rejection = str(exc)

@@ -65,6 +65,7 @@ class StepControl:
     easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
     impact_steps: float = 0.0  # > 0: contact-impact step control on (formulation.md 5, contact.ccd)
     entry_fraction: float = 0.05  # implicit: share of the activation gap an approaching pair may close per step
+    energy_growth: float = 1e-3  # implicit: largest energy gain of a step, in sum m g d (0: off; newmark.advance)
 
 
 @dataclass
@@ -74,3 +75,4 @@ class RunStats:
     newton_iterations: int = 0
     krylov_iterations: int = 0
     last_rejection: str = ""
+    energy_gains: int = 0  # implicit: steps accepted below 1e-3 dt_max although the energy grew
