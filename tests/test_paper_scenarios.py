@@ -154,4 +154,7 @@ def test_paper_examples_are_valid_configs(name):
 
 def test_summary_is_json(settled):
     out, summary = settled
-    assert json.loads((out / "summary.json").read_text())["n_grains"] == summary["n_grains"]
+    written = json.loads((out / "summary.json").read_text())
+    assert written["n_grains"] == summary["n_grains"]
+    assert written["newton_iterations_per_step"] == written["n_newton_iterations"] / written["n_steps"]
+    assert written["n_energy_gain_steps"] == 0

@@ -18,6 +18,8 @@ def drop_config(duration=0.004, every=1e-3, **solver):
     raw = tomllib.loads(example_text("drop"))
     raw["duration"] = duration
     raw["output"] = {"every": every, "vtk": True}
+    if "model" in solver:
+        raw["model"] = {"grains": solver.pop("model")}
     raw["solver"].update(solver)
     cfg, _ = checked_config(raw)
     return cfg
@@ -81,10 +83,11 @@ def test_floor_carries_the_weight_at_rest(tmp_path):
 
 
 # the explicit runs use mass scaling so that a stable step is about a microsecond
-INTEGRATORS = [{}, {"integrator": "explicit", "mass_scaling": 1e4}]
+INTEGRATORS = [{}, {"integrator": "explicit", "mass_scaling": 1e4}, {"integrator": "explicit", "model": "rigid"}]
+IDS = ["implicit", "explicit", "rigid"]
 
 
-@pytest.mark.parametrize("solver", INTEGRATORS, ids=["implicit", "explicit"])
+@pytest.mark.parametrize("solver", INTEGRATORS, ids=IDS)
 def test_same_config_same_result(tmp_path, solver):
     cfg = drop_config(duration=0.014, **solver)
     scene_mod.run(cfg, tmp_path / "a")
@@ -92,7 +95,7 @@ def test_same_config_same_result(tmp_path, solver):
     assert (tmp_path / "a/grains.csv").read_bytes() == (tmp_path / "b/grains.csv").read_bytes()
 
 
-@pytest.mark.parametrize("solver", INTEGRATORS, ids=["implicit", "explicit"])
+@pytest.mark.parametrize("solver", INTEGRATORS, ids=IDS)
 def test_resume_continues_to_the_same_result(tmp_path, monkeypatch, solver):
     cfg = drop_config(duration=0.014, **solver)
     scene_mod.run(cfg, tmp_path / "full")

@@ -119,7 +119,7 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scen
     except ValueError as exc:
         raise ConfigError(f"contact: {exc}") from None
     return Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
-                       vem_options_from(cfg), mass_scaling=scaling)  # fmt: skip
+                       vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
 
 
 def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:

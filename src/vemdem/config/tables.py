@@ -144,6 +144,13 @@ SOLVER = {
     ),
 }
 
+MODEL = {
+    "grains": Field(
+        ("flexible", "rigid"), "flexible",
+        doc="flexible: one virtual element per grain (the paper); rigid: six dofs per grain, explicit integrator only",
+    ),
+}
+
 OUTPUT = {
     "every": Field(float, 1e-3, positive, "simulated time between written frames (s)"),
     "vtk": Field(bool, True, doc="write the ParaView series grains.pvd"),
@@ -164,6 +171,7 @@ SCENE = {
     "duration": Field(float, REQUIRED, positive, "simulated time (s)"),
     "material": MATERIAL,
     "vem": VEM,
+    "model": MODEL,
     "contact": CONTACT,
     "solver": SOLVER,
     "grains": TableList(SCENE_GRAIN, min_items=1),
@@ -210,6 +218,7 @@ def granular_tables(mu_s: float, mu_d: float, every: float) -> dict:
         "gravity": Field(list, [0.0, 0.0, -9.81], vector3, "m/s^2"),
         "material": PAPER_MATERIAL,
         "vem": VEM,
+        "model": MODEL,
         "contact": with_defaults(CONTACT, mu_s=mu_s, mu_d=mu_d),
         "solver": GRANULAR_SOLVER,
         "settle": SETTLE,
@@ -294,6 +303,10 @@ def check_rules(cfg: dict) -> None:
             raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
         if solver["dt"] < solver["dt_min"]:
             raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    model = cfg.get("model")
+    if isinstance(model, dict) and model.get("grains") == "rigid" and isinstance(solver, dict):
+        if solver.get("integrator") != "explicit":
+            raise ConfigError('model.grains: "rigid" has the explicit integrator only; set solver.integrator = "explicit"')
     _check_frames(cfg)
     lid = cfg.get("lid")
     if isinstance(lid, dict) and lid["end"] >= lid["start"]:

@@ -21,8 +21,17 @@ from numba import njit
 
 from .forces import pair_inverse_masses
 from .law import normal_stiffness
-from .narrow import EDGE_EDGE, N_NODES, VERTEX_EDGE, VERTEX_FACE, edge_edge_closest, point_triangle_closest, vertex_edge_lcp
-from .pairs import GAP, GRAIN_A, GRAIN_B, KIND, NODE0, find_contacts
+from .narrow import (
+    EDGE_EDGE,
+    N_NODES,
+    VERTEX_EDGE,
+    VERTEX_FACE,
+    edge_edge_closest,
+    pair_weights,
+    point_triangle_closest,
+    vertex_edge_lcp,
+)
+from .pairs import C0, C1, GAP, GRAIN_A, GRAIN_B, KIND, NODE0, find_contacts
 
 
 def surface_displacements(dx: np.ndarray, vertex_ptr: np.ndarray, n_surfaces: int) -> np.ndarray:
@@ -310,15 +319,7 @@ def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.n
     impacts gained energy. inf without pairs."""
     if len(ints) == 0:
         return np.inf
-    k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), law_params)
-    inv = pair_inverse_masses(inv_mass_all, ints, floats)
-    loaded = k * inv > 0
-    if not loaded.any():
-        return np.inf
-    k, inv, m_eq = k[loaded], inv[loaded], m_eq[loaded]
-    omega = np.sqrt(k * inv)
-    zeta_p = zeta * np.sqrt(m_eq * inv)
-    return float(np.min(2.0 / omega * (np.sqrt(1.0 + zeta_p * zeta_p) - zeta_p)))
+    return damped_pair_step(pair_inverse_masses(inv_mass_all, ints, floats), floats, law_params, m_eq, zeta)
 
 
 def stiffest_pair_frequency(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params) -> float:
@@ -374,3 +375,48 @@ def closing_time(d, speed, gbar, f) -> float:
         return np.inf
     d, speed = d[moving], speed[moving]
     return float(np.min((np.maximum(d - gbar, 0.0) + f * np.minimum(d, gbar)) / speed))
+
+
+@njit(cache=True)
+def rigid_pair_inverse_masses(x_all, ints, floats, centre, rotation, mass, moments):
+    """1/m_eff of every pair along its normal n = sum_i w_i x_i / |.|: sum over its grain sides
+    of 1/m + (r x n) . I^-1 (r x n), r from the grain's centroid to the contact point, I^-1 =
+    R diag(1/I_k) R^T (a wall side adds nothing): rigid grains (model/rigid.py), given as arrays."""
+    G = len(mass)
+    out = np.zeros(len(ints))
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    for c in range(len(ints)):
+        kind = ints[c, KIND]
+        w = pair_weights(kind, floats[c, C0], floats[c, C1], w0, D)
+        d = np.zeros(3)
+        p = np.zeros(3)
+        for i in range(N_NODES[kind]):
+            node = ints[c, NODE0 + i]
+            for a in range(3):
+                d[a] += w[i] * x_all[node, a]
+                if w[i] < 0.0:
+                    p[a] -= w[i] * x_all[node, a]
+        n = d / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        for side in (GRAIN_A, GRAIN_B):
+            g = ints[c, side]
+            if g >= G:
+                continue
+            r = p - centre[g]
+            rn = np.cross(r, n)
+            body = rotation[g].T @ rn
+            out[c] += 1.0 / mass[g] + np.sum(body * body / moments[g])
+    return out
+
+
+def damped_pair_step(inv_mass: np.ndarray, floats: np.ndarray, law_params, m_eq: np.ndarray, zeta: float) -> float:
+    """The central-difference limit of every pair given its inverse mass along the normal
+    (omega^2 = k(g) / m_eff) and the damping ratio its normal damping has there,
+    zeta_p = zeta sqrt(m_eq / m_eff): min of 2/omega (sqrt(1 + zeta_p^2) - zeta_p)."""
+    k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), law_params)
+    loaded = k * inv_mass > 0
+    if not loaded.any():
+        return np.inf
+    omega = np.sqrt(k[loaded] * inv_mass[loaded])
+    zp = zeta * np.sqrt(m_eq[loaded] * inv_mass[loaded])
+    return float(np.min(2.0 / omega * (np.sqrt(1.0 + zp**2) - zp)))

@@ -28,7 +28,8 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
     np.savez(tmp, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated, power=state.power,
              keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
-             krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint)  # fmt: skip
+             krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint,
+             **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
 
@@ -41,7 +42,9 @@ def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
             if str(d["fingerprint"]) != fingerprint:
                 raise CheckpointError(f"--resume: {path} was written by a different config")
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
-            state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]))
+            bodies = {k.removeprefix("body_"): d[k] for k in d.files if k.startswith("body_")}
+            state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]),
+                          bodies)  # fmt: skip
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
             krylov = int(d["krylov"]) if "krylov" in d.files else 0

@@ -23,6 +23,9 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_rejected_steps": stats.rejected,
         "n_newton_iterations": stats.newton_iterations,
         "n_krylov_iterations": stats.krylov_iterations,
+        "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
+        "newton_iterations_per_simulated_second": stats.newton_iterations / state.t if state.t > 0 else 0.0,
+        "n_energy_gain_steps": stats.energy_gains,  # implicit: tiny steps accepted although the energy grew
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,

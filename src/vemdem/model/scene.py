@@ -19,6 +19,7 @@ from ..geometry.polyhedron import Polyhedron
 from ..vem.element import VemOptions
 from ..vem.material import Material
 from .bodies import BodyModel, VemBodies, equivalent_diameters
+from .rigid import RigidBodies
 
 
 @dataclass
@@ -33,8 +34,14 @@ class Scene:
     @classmethod
     def build(cls, grains, material: Material, law: InterfaceLaw, friction: FrictionLaw = FrictionLaw(),
               planes=(), meshes=(), gravity=(0.0, 0.0, -9.81), vem: VemOptions = VemOptions(),
-              mass_scaling: float = 1.0) -> "Scene":  # fmt: skip
-        bodies = VemBodies(list(grains), material, vem)
+              mass_scaling: float = 1.0, grain_model: str = "flexible") -> "Scene":  # fmt: skip
+        """grain_model: "flexible" (one virtual element per grain) or "rigid" (model/rigid.py)."""
+        if grain_model == "rigid":
+            bodies = RigidBodies(list(grains), material, vem)
+        elif grain_model == "flexible":
+            bodies = VemBodies(list(grains), material, vem)
+        else:
+            raise ValueError(f'grain_model must be "flexible" or "rigid", got {grain_model!r}')
         contact = ContactModel(bodies.reference, [g.faces for g in grains], bodies.vertex_ptr, bodies.body_mass, law,
                                friction, planes=planes, meshes=meshes)  # fmt: skip
         return cls(list(grains), material, bodies, contact, np.asarray(gravity, float), float(mass_scaling))

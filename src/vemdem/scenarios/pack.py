@@ -94,6 +94,7 @@ def pack_config(cfg: dict) -> dict:
     settle = {k: field.default for k, field in SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
     return {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
+            "model": cfg["model"],
             "contact": contact, "solver": solver, "settle": settle,
             "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
 

@@ -17,6 +17,7 @@ from .explicit import ExplicitIntegrator, ExplicitParameters, advance_explicit, 
 from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
 from .newmark import NewmarkParameters, advance, initial_state
+from .rigid import RigidExplicit
 from .state import RunStats, State, StepControl
 
 INTEGRATORS = ("implicit", "explicit")
@@ -96,12 +97,33 @@ class ExplicitCentral:
         return advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
 
 
+class RigidCentral(ExplicitCentral):
+    """Rigid grains: velocity Verlet + symplectic free rotation (solver/rigid.py). Energies with
+    the consistent mass, exact for rigid motions."""
+
+    lumped = False
+
+    def __init__(self, scene: Scene, options: SolverOptions):
+        self.scene = scene
+        self.control = _control(options)
+        self.integrator = RigidExplicit(scene, ExplicitParameters(safety=options.safety,
+                                                                  mass_damping=options.mass_damping))  # fmt: skip
+
+    def initial_state(self, x0=None, v0=None) -> State:
+        return self.integrator.initial_state(x0, v0)
+
+
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
                        entry_fraction=o.entry_fraction, energy_growth=o.energy_growth)  # fmt: skip
 
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
+    if scene.bodies.kind == "rigid":
+        if options.integrator != "explicit":
+            raise ValueError('rigid grains (model.grains = "rigid") have the explicit integrator only: '
+                             'set solver.integrator = "explicit"')  # fmt: skip
+        return RigidCentral(scene, options)
     if options.integrator == "explicit":
         return ExplicitCentral(scene, options)
     return ImplicitNewmark(scene, options)

@@ -31,9 +31,13 @@ class State:
     history: ContactHistory = field(default_factory=ContactHistory.empty)
     dissipated: float = 0.0
     power: float = 0.0
+    # body-model coordinates beyond the vertices (rigid grains: centre, rotation, velocity,
+    # momentum, force, torque); checkpoints save them too
+    bodies: dict = field(default_factory=dict)
 
     def copy(self) -> "State":
-        return replace(self, x=self.x.copy(), v=self.v.copy(), a=self.a.copy())
+        return replace(self, x=self.x.copy(), v=self.v.copy(), a=self.a.copy(),
+                       bodies={k: v.copy() for k, v in self.bodies.items()})  # fmt: skip
 
 
 @dataclass
