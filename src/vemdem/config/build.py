@@ -10,6 +10,7 @@ import numpy as np
 
 from ..contact.defaults import default_contact_laws
 from ..contact.walls import Motion, PlaneWall
+from ..geometry.overlap import first_overlap
 from ..geometry.polyhedron import GeometryError, Polyhedron
 from ..geometry.shapes import cube, l_prism, rotation_matrix, sand_grain, tetrahedron
 from ..io.surfaces import load_mesh_wall, load_surface
@@ -122,10 +123,29 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scen
                        vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
 
 
+def check_placement(grains: list[Polyhedron], planes: list) -> None:
+    """Grains must start apart from each other and in front of every wall: an overlap has no
+    contact pair (the barrier acts across a positive gap) and would fail later, misleadingly."""
+    pair = first_overlap(grains)
+    if pair is not None:
+        a, b = pair
+        raise ConfigError(f"grains[{a}] and grains[{b}]: they overlap at the start (a vertex of one is inside the "
+                          "other); move them apart")  # fmt: skip
+    for k, plane in enumerate(planes):
+        if not plane.motion.active(0.0):
+            continue
+        for g, grain in enumerate(grains):
+            depth = float(np.min((grain.vertices - plane.point_at(0.0)) @ plane.normal))
+            if depth <= 0.0:
+                raise ConfigError(f"grains[{g}]: it starts {-depth:.3g} m behind walls[{k}] ({plane.name!r}); "
+                                  "place it in front of the wall")  # fmt: skip
+
+
 def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
     """The `scene` scenario's grains, walls and initial vertex velocities."""
     grains = [place_grain(g, base_dir) for g in cfg["grains"]]
     planes, meshes = build_walls(cfg["walls"], base_dir)
+    check_placement(grains, planes)
     scene = scene_from(grains, cfg, planes, meshes)
     v0 = np.vstack([np.tile(g["velocity"], (grain.n_vertices, 1)) for g, grain in zip(cfg["grains"], grains)])
     return scene, v0

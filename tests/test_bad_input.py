@@ -1,0 +1,224 @@
+"""Bad input gets exit status 2, one line on stderr naming the key or file, no traceback, and no
+output folder left behind (issue 15). Each case mutates the `drop` example (a `scene` run) or
+a `pile` example, or breaks a file the config names."""
+
+import copy
+import tomllib
+
+import numpy as np
+import pytest
+
+from vemdem.scenarios.registry import example_text
+
+DROP = tomllib.loads(example_text("drop"))
+PILE = tomllib.loads(example_text("pile"))
+
+
+def dump(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, float):
+        return repr(value) if np.isfinite(value) else ("nan" if np.isnan(value) else ("inf" if value > 0 else "-inf"))
+    if isinstance(value, list):
+        return "[" + ", ".join(dump(v) for v in value) + "]"
+    return str(value)
+
+
+def to_toml(cfg: dict) -> str:
+    """Enough TOML for these configs: scalars and tables first, then arrays of tables."""
+    lines = []
+
+    def table(prefix, d):
+        for k, v in d.items():
+            if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict)):
+                lines.append(f"{k} = {dump(v)}")
+        for k, v in d.items():
+            if isinstance(v, dict):
+                lines.append(f"[{prefix}{k}]")
+                table(f"{prefix}{k}.", v)
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for item in v:
+                    lines.append(f"[[{prefix}{k}]]")
+                    table(f"{prefix}{k}.", item)
+
+    table("", cfg)
+    return "\n".join(lines) + "\n"
+
+
+def setter(path: str, value):
+    def apply(cfg):
+        node = cfg
+        keys = path.split(".")
+        for k in keys[:-1]:
+            node = node[int(k)] if isinstance(node, list) else node.setdefault(k, {})
+        if value is DELETE:
+            del node[keys[-1]]
+        else:
+            node[keys[-1]] = value
+
+    return apply
+
+
+DELETE = object()
+
+# (id, base config, mutation, text the one-line message must contain)
+CONFIG_CASES = [
+    ("unknown top key", DROP, setter("colour", "red"), "colour"),
+    ("unknown table key", DROP, setter("material.colour", 1.0), "material.colour"),
+    ("missing scenario", DROP, setter("scenario", DELETE), "scenario"),
+    ("unknown scenario", DROP, setter("scenario", "avalanche"), "scenario"),
+    ("missing duration", DROP, setter("duration", DELETE), "duration"),
+    ("negative duration", DROP, setter("duration", -1.0), "duration"),
+    ("zero duration", DROP, setter("duration", 0.0), "duration"),
+    ("nan duration", DROP, setter("duration", float("nan")), "duration"),
+    ("inf duration", DROP, setter("duration", float("inf")), "duration"),
+    ("string duration", DROP, setter("duration", "long"), "duration"),
+    ("missing E", DROP, setter("material.E", DELETE), "material.E"),
+    ("negative E", DROP, setter("material.E", -1e9), "material.E"),
+    ("nu too large", DROP, setter("material.nu", 0.5), "material.nu"),
+    ("negative density", DROP, setter("material.density", -1.0), "material.density"),
+    ("mu_d above mu_s", DROP, setter("contact.mu_d", 0.9), "contact.mu_d"),
+    ("negative mu_s", DROP, setter("contact.mu_s", -0.1), "contact.mu_s"),
+    ("unknown integrator", DROP, setter("solver.integrator", "leapfrog"), "solver.integrator"),
+    ("unknown linear solver", DROP, setter("solver.linear", "cg"), "solver.linear"),
+    ("dt_min above dt_max", DROP, setter("solver.dt_min", 1e-3), "solver.dt_min"),
+    ("gamma below 1/2", DROP, setter("solver.gamma", 0.4), "solver.gamma"),
+    ("negative energy_growth", DROP, setter("solver.energy_growth", -1.0), "solver.energy_growth"),
+    ("mass scaling below 1", DROP, setter("solver.mass_scaling", 0.5), "solver.mass_scaling"),
+    ("rigid grains implicit", DROP, setter("model", {"grains": "rigid"}), "model.grains"),
+    ("unknown grain model", DROP, setter("model", {"grains": "soft"}), "model.grains"),
+    ("no grains", DROP, setter("grains", []), "grains"),
+    ("grain without position", DROP, setter("grains.0.position", DELETE), "grains[0].position"),
+    ("position of two numbers", DROP, setter("grains.0.position", [0.0, 1.0]), "grains[0].position"),
+    ("unknown shape", DROP, setter("grains.0.shape", "sphere"), "grains[0].shape"),
+    ("too few vertices", DROP, setter("grains.0.vertices", 3), "grains[0].vertices"),
+    ("negative size", DROP, setter("grains.0.size", -1e-3), "grains[0].size"),
+    ("missing grain file", DROP, setter("grains.0.file", "nowhere.stl"), "nowhere.stl"),
+    ("overlapping grains", DROP, setter("grains.1.position", [0.0, 0.0, 1.3e-3]), "grains[0] and grains[1]"),
+    ("grain behind the floor", DROP, setter("grains.0.position", [0.0, 0.0, 0.1e-3]), "grains[0]"),
+    ("unknown wall type", DROP, setter("walls.0.type", "sphere"), "walls[0].type"),
+    ("zero wall normal", DROP, setter("walls.0.normal", [0.0, 0.0, 0.0]), "walls[0].normal"),
+    ("missing wall mesh", DROP, setter("walls", [{"type": "mesh", "file": "lid.obj"}]), "lid.obj"),
+    ("tiny output interval", DROP, setter("output.every", 1e-12), "output.every"),
+    ("negative output interval", DROP, setter("output.every", -1e-3), "output.every"),
+    ("vtk not a bool", DROP, setter("output.vtk", "yes"), "output.vtk"),
+    ("pile: zero grains", PILE, setter("pack.n_grains", 0), "pack.n_grains"),
+    ("pile: negative seed", PILE, setter("pack.seed", -1), "pack.seed"),
+    ("pile: pack mu_d above mu_s", PILE, setter("pack.mu_d", 2.0), "pack.mu_d"),
+    ("pile: missing initial state", PILE, setter("initial_state", "none/state.npz"), "none/state.npz"),
+    ("pile: box of zero width", PILE, setter("pack.box.width", 0.0), "pack.box.width"),
+    ("pile: threshold zero", PILE, setter("settle.kinetic_threshold", 0.0), "settle.kinetic_threshold"),
+]
+
+
+def assert_one_line_error(code, err, needle):
+    assert code == 2, err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    assert needle in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("base,mutate,needle", [c[1:] for c in CONFIG_CASES], ids=[c[0] for c in CONFIG_CASES])
+def test_bad_config_is_one_line_naming_the_cause(tmp_path, cli, base, mutate, needle):
+    cfg = copy.deepcopy(base)
+    mutate(cfg)
+    path = tmp_path / "job.toml"
+    path.write_text(to_toml(cfg))
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, needle)
+    assert not (tmp_path / "out").exists()
+
+
+def good_drop(tmp_path, **changes):
+    cfg = copy.deepcopy(DROP)
+    cfg["duration"] = 1e-3
+    cfg["output"] = {"every": 1e-3, "vtk": False}
+    for k, v in changes.items():
+        setter(k, v)(cfg)
+    path = tmp_path / "job.toml"
+    path.write_text(to_toml(cfg))
+    return path
+
+
+FILE_CASES = {
+    "empty grain file": ("grain.stl", b"", "grain.stl"),
+    "binary garbage grain file": ("grain.stl", bytes(range(256)) * 4, "grain.stl"),
+    "unknown grain file extension": ("grain.xyz", b"1 2 3\n", "grain.xyz"),
+    "open surface grain file": ("grain.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n", "grain.obj"),
+}
+
+
+@pytest.mark.parametrize("name,content,needle", list(FILE_CASES.values()), ids=list(FILE_CASES))
+def test_bad_grain_file_is_one_line_naming_it(tmp_path, cli, name, content, needle):
+    (tmp_path / name).write_bytes(content)
+    path = good_drop(tmp_path, **{"grains.0.file": name})
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, needle)
+
+
+WALL_CASES = {
+    "unknown wall mesh extension": ("lid.xyz", b"1 2 3\n", "lid.xyz"),
+    "empty wall mesh": ("lid.obj", b"", "lid.obj"),
+    "wall mesh without faces": ("lid.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "lid.obj"),
+}
+
+
+@pytest.mark.parametrize("name,content,needle", list(WALL_CASES.values()), ids=list(WALL_CASES))
+def test_bad_wall_mesh_is_one_line_naming_it(tmp_path, cli, name, content, needle):
+    (tmp_path / name).write_bytes(content)
+    walls = [{"type": "plane", "name": "floor", "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]},
+             {"type": "mesh", "file": name}]  # fmt: skip
+    path = good_drop(tmp_path, walls=walls)
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, needle)
+
+
+STATE_CASES = {
+    "empty state file": b"",
+    "truncated zip": b"PK\x03\x04" + b"\x00" * 40,
+    "text instead of npz": b"not a state\n",
+}
+
+
+@pytest.mark.parametrize("content", list(STATE_CASES.values()), ids=list(STATE_CASES))
+def test_bad_initial_state_is_one_line_naming_it(tmp_path, cli, content):
+    (tmp_path / "state.npz").write_bytes(content)
+    cfg = copy.deepcopy(PILE)
+    cfg["initial_state"] = "state.npz"
+    path = tmp_path / "job.toml"
+    path.write_text(to_toml(cfg))
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, "state.npz")
+
+
+@pytest.mark.parametrize("content", list(STATE_CASES.values()), ids=list(STATE_CASES))
+def test_bad_checkpoint_is_one_line_and_never_suggests_pickle(tmp_path, cli, content):
+    path = good_drop(tmp_path)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--quiet")[0] == 0
+    (out / "checkpoint.npz").write_bytes(content)
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert_one_line_error(code, err, "checkpoint")
+    assert "pickle" not in err
+
+
+def test_non_utf8_config(tmp_path, cli):
+    path = tmp_path / "job.toml"
+    path.write_bytes(b"scenario = \"scene\"\nname = \"\xff\xfe\"\n")
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, "job.toml")
+
+
+def test_malformed_toml(tmp_path, cli):
+    path = tmp_path / "job.toml"
+    path.write_text("scenario = \"scene\"\n[material\nE = 1\n")
+    code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, "job.toml")
+
+
+def test_missing_config_file(tmp_path, cli):
+    code, _, err = cli("run", tmp_path / "nowhere.toml", "--out", tmp_path / "out", "--quiet")
+    assert_one_line_error(code, err, "nowhere.toml")
