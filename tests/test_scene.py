@@ -131,4 +131,4 @@ def test_grain_behind_a_wall_is_a_config_error(tmp_path, capsys):
     text = example_text("drop").replace("position = [0.0, 0.0, 1.2e-3]", "position = [0.0, 0.0, 0.2e-3]")
     (tmp_path / "job.toml").write_text(text)
     code = main(["run", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out"), "--quiet"])
-    assert code == 2 and "behind wall 'floor'" in capsys.readouterr().err
+    assert code == 2 and "behind walls[0] ('floor')" in capsys.readouterr().err
