@@ -230,6 +230,11 @@ def _reach(trans: np.ndarray, spread: np.ndarray) -> np.ndarray:
     return np.linalg.norm(trans - m, axis=1) + spread
 
 
+def update_reach(trans: np.ndarray, spread: np.ndarray) -> float:
+    """The most any two surfaces can approach along an update: top2 of _reach."""
+    return _top2(_reach(trans, spread))
+
+
 def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray, floats: np.ndarray,
                         gbar: float, nodes=_NO_NODES) -> float:  # fmt: skip
     """Largest alpha such that the update scaled by alpha cannot bring two surfaces into contact

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..contact.ccd import (
     accd_alpha,
+    update_reach,
     free_distance_ratio,
     impact_step_limit,
     missed_pairs,
@@ -102,26 +103,39 @@ class _UpdatePath:
 
 
 def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, candidates, margin) -> float:
-    """The share alpha <= 1 of an update that keeps every pair apart: pairs within the layer by
-    additive CCD along the update's path (each keeps 1 - ccd_fraction of its distance), all
-    others by contact.ccd's bound from the start, one for the scene ("global") or one per pair
-    ("pairwise"; du: the step's displacement so far, for pairs outside the step's search)."""
+    """The share alpha <= 1 of an update that keeps every pair apart.
+
+    D = top2 of the surfaces' reach (contact.ccd.update_reach) bounds how much any two surfaces
+    can approach at alpha = 1. When the step's search reaches far enough (the surfaces outside
+    its candidates were gbar + margin apart at the start of the step and have moved by du since),
+    every feature pair closer than gbar + D is found and bounded by additive CCD along the
+    update's path (each keeps 1 - ccd_fraction of its distance), and every other pair stays
+    outside the activation layer. Otherwise pairs within the layer are bounded by additive CCD
+    and all others by contact.ccd's bound from the start ("global", or "pairwise")."""
     contact = scene.contact
     gbar = contact.law.activation_gap
+    keep = 1.0 - params.ccd_fraction
+    D = update_reach(path.trans, path.spread)
+    if D == 0.0:
+        return 1.0
+    vptr = scene.bodies.vertex_ptr
+    moved = surface_displacements(du, vptr, _n_surfaces(scene))
+    x_all = contact.all_positions(path.x, t)
+    nodes = (x_all, len(path.x), contact.plane_node0, path.dx, contact.topology.vertex_grain, path.c, path.t,
+             path.phi, path.excess)  # fmt: skip
+    if update_reach(np.zeros((len(moved), 3)), moved) + D <= margin:
+        _, near, _ = contact.pairs(path.x, t, candidates, reach=gbar + D)
+        return accd_alpha(near, *nodes, keep, 1.0) if len(near) else 1.0
     none = ints[:0], floats[:0]  # the pairs within the layer are left to the additive CCD below
     if params.ccd != "pairwise":
         ratio = free_distance_ratio(path.trans, path.spread, *none, gbar)
     else:
-        vptr = scene.bodies.vertex_ptr
-        moved = surface_displacements(du, vptr, _n_surfaces(scene))
         planes = [p for p in contact.planes if p.motion.active(t)]
         dist = np.column_stack([plane_distances(path.x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
         ratio = pairwise_distance_ratio(path.trans, path.spread, moved, *none, candidates, gbar, margin, dist)
     alpha = min(1.0, params.ccd_fraction * ratio)
     if len(ints):
-        x_all = contact.all_positions(path.x, t)
-        alpha = accd_alpha(ints, x_all, len(path.x), contact.plane_node0, path.dx, contact.topology.vertex_grain,
-                           path.c, path.t, path.phi, path.excess, 1.0 - params.ccd_fraction, alpha)  # fmt: skip
+        alpha = accd_alpha(ints, *nodes, keep, alpha)
     return alpha
 
 
@@ -194,13 +208,16 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     # search once per step, widened by twice the predicted travel so that pairs the step closes in on
     # are candidates from the start (without it, a grain could only creep towards the gap)
     travel = np.sqrt(np.max(np.sum((state.v * dt + 0.5 * state.a * dt * dt) ** 2, axis=1), initial=0.0))
-    candidates = contact.search(state.x, t1, margin=2.0 * travel)
+    # (4 travel + gbar: room for Newton's first updates, which carry the whole step's motion, so
+    # that _update_share can bound every pair they bring near by additive CCD)
+    margin = 4.0 * travel + contact.law.activation_gap
+    candidates = contact.search(state.x, t1, margin=margin)
     x = state.x.copy()
     if params.predictor == "acceleration":
         guess = state.v * dt + 0.5 * dt * dt * state.a
         _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
-        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, 2.0 * travel))
+        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, margin))
     size = float(np.cbrt(scene.bodies.volume.mean()))
     linear = params.linear if params.linear is not None else _default_linear()
     krylov = 0
@@ -226,19 +243,22 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         dx = -linear.solve(R, params.krylov_rtol).reshape(-1, 3)
         krylov += linear.stats.last_iterations
         path = _UpdatePath(scene, x, dx, params.update)
-        alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, t1, candidates, 2.0 * travel)
+        alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, t1, candidates, margin)
         # A pair that changes type or eligibility between iterations (a vertex crossing a face's
         # edge) changes the tangent discontinuously, and full updates can cycle between two states
         # (seen in a twelve-grain drop: the same |dx| every other iteration, never converging).
-        # A full update that has not halved the correction of two iterations before is shortened.
+        # A full update that has halved neither the correction nor the residual of two iterations
+        # before is shortened.
         dx_norm = np.abs(dx).max()
         r_tol = params.rtol * scale
         dx_tol = params.xtol * max(np.abs(du).max(), 1e-6 * size)
         if params.accuracy > 0:
             dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
-        if it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2], dx_tol):
+        r_norm = np.abs(R).max()
+        if (it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
+                and r_norm > 0.5 * corrections[-2][1]):  # fmt: skip
             alpha = params.stall_share
-        corrections.append(dx_norm)
+        corrections.append((dx_norm, r_norm))
         if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
