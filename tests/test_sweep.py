@@ -2,11 +2,14 @@
 
 import csv
 import json
+import tomllib
 import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from vemdem.scenarios.registry import checked_config
 
 from vemdem.config import ConfigError
 from vemdem.sweep import (
@@ -172,8 +175,10 @@ def test_sweep_runs_cases_on_a_local_cluster(tmp_path, cli):
     assert rows[2]["max_force"] == "" and rows[0]["error"] == ""
 
     for name, row in zip(names, rows):
-        config = json.loads((out / name / "config.json").read_text())
+        # each case's config is TOML that `vemdem run` accepts as it is
+        config = tomllib.loads((out / name / "config.toml").read_text())
         assert config["material"]["E"] == float(row["material.E"])
+        checked_config(config)
     for name, row in zip(names[:2], rows[:2]):
         summary = json.loads((out / name / "summary.json").read_text())
         assert summary["max_force"] == float(row["max_force"])

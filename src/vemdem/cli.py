@@ -185,7 +185,7 @@ def cmd_sweep(args) -> int:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
     out = args.out.resolve()
-    sweep.write_case_configs(cases, out)
+    sweep.write_case_configs(cases, out, args.config.resolve().parent)
     try:
         results = sweep.run_cases(cases, out, args.config.resolve().parent, args.scheduler, args.workers, args.quiet,
                                   args.dashboard)  # fmt: skip

@@ -15,6 +15,8 @@ import json
 import re
 import sys
 import tomllib
+
+import tomli_w
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from .config import ConfigError
+from .config.build import resolve_path
 from .scenarios.registry import checked_config
 
 Scalar = bool | int | float | str
@@ -168,12 +171,32 @@ def plan_cases(base: dict, set_args: list[str], zipped: bool) -> list[Case]:
     return cases
 
 
-def write_case_configs(cases: list[Case], out: Path) -> None:
-    """Written before anything runs, so even a case that dies with its worker can be re-run alone."""
+def _absolute_paths(raw: dict, base_dir: Path) -> dict:
+    """The config with every file it names made absolute (files are relative to the config file,
+    and a case's config.toml lives in the case folder, not beside the base config)."""
+    raw = json.loads(json.dumps(raw))
+    base = Path(base_dir).resolve()
+
+    def fix(table: dict, key: str):
+        if isinstance(table, dict) and table.get(key):
+            table[key] = str(resolve_path(table[key], base))
+
+    fix(raw, "initial_state")
+    fix(raw.get("grain", {}), "file")
+    for item in raw.get("grains", []) if isinstance(raw.get("grains"), list) else []:
+        fix(item, "file")
+    for item in raw.get("walls", []) if isinstance(raw.get("walls"), list) else []:
+        fix(item, "file")
+    return raw
+
+
+def write_case_configs(cases: list[Case], out: Path, base_dir: Path = Path(".")) -> None:
+    """Each case's config as TOML that `vemdem run` accepts (files named absolutely), written
+    before anything runs, so even a case that dies with its worker can be re-run alone."""
     for case in cases:
         folder = out / case.name
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / "config.json").write_text(json.dumps(case.raw, indent=2, default=str) + "\n")
+        (folder / "config.toml").write_text(tomli_w.dumps(_absolute_paths(case.raw, base_dir)))
 
 
 def flatten(summary: dict, prefix: str = "") -> dict[str, Scalar]:
