@@ -133,6 +133,13 @@ def path_excess(x, dx, vertex_ptr, c, t, phi):
     return out
 
 
+def rigid_part(x, dx, weights, vertex_ptr):
+    """t + phi x r of every vertex: the rigid motion that fits dx best, grain by grain."""
+    c, t, phi, _ = rigid_split(x, dx, weights, vertex_ptr)
+    g = np.repeat(np.arange(len(vertex_ptr) - 1), np.diff(vertex_ptr))
+    return t[g] + np.cross(phi[g], x - c[g])
+
+
 class RigidRetraction:
     """One Newton update dx at x, split once; `at(alpha)` moves the grains along it and `bounds`
     are the surface displacement bounds of alpha = 1 (conservative advancement)."""

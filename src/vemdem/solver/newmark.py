@@ -30,7 +30,7 @@ from ..contact.ccd import (
 )
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
-from ..model.motion import RigidRetraction
+from ..model.motion import RigidRetraction, rigid_part
 from ..model.scene import Scene
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
@@ -47,7 +47,7 @@ class NewmarkParameters:
     max_iterations: int = 15
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
-    predictor: str = "rest"  # first iterate: "rest" (x_n) or "acceleration" (x_n + dt v_n + dt^2/2 a_n, CCD-bounded)
+    predictor: str = "rest"  # first iterate: "rest" (x_n), "acceleration" (x_n + dt v_n + dt^2/2 a_n) or "rigid" (its rigid part per grain), CCD-bounded
     linear: object = None  # a solver.linear LinearSolver, made once per run (None: "auto")
     krylov_rtol: float = 1e-8  # relative residual of iterative linear solves (inexact Newton)
     line_search: bool = False  # backtrack on the incremental potential (IPC's merit) while the update is large
@@ -213,8 +213,10 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     margin = 4.0 * travel + contact.law.activation_gap
     candidates = contact.search(state.x, t1, margin=margin)
     x = state.x.copy()
-    if params.predictor == "acceleration":
+    if params.predictor in ("acceleration", "rigid"):
         guess = state.v * dt + 0.5 * dt * dt * state.a
+        if params.predictor == "rigid":  # each grain's rigid part of it only (no elastic noise)
+            guess = rigid_part(state.x, guess, scene.bodies.lumped, scene.bodies.vertex_ptr)
         _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
         x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, margin))
