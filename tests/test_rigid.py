@@ -145,3 +145,21 @@ def test_rigid_grains_need_the_explicit_integrator():
     raw["solver"]["integrator"] = "explicit"
     cfg, _ = checked_config(raw)
     assert cfg["model"]["grains"] == "rigid"
+
+
+def test_contact_points_on_a_wall_plane_lie_under_the_vertices():
+    """A wall plane is a finite triangle in the pair records, and a vertex may project outside it
+    (weights of any sign): the contact point must still be the vertex's foot on the plane (it was
+    the triangle's corner, which made the rigid step 6 times too short)."""
+    from vemdem.contact.forces import contact_points
+
+    law, friction = default_contact_laws(SIZE, MATERIAL.E, MATERIAL.density)
+    grain = cube(SIZE).translated((4e-3, -3e-3, 0.5 * SIZE + 0.5 * law.activation_gap))
+    floor = PlaneWall(np.zeros(3), np.array([0.0, 0.0, 1.0]), name="floor")
+    scene = Scene.build([grain], MATERIAL, law, friction, planes=[floor], gravity=(0, 0, 0))
+    x = scene.bodies.reference
+    x_all, ints, floats = scene.contact.pairs(x, 0.0, scene.contact.search(x, 0.0))
+    assert len(ints) == 4  # the bottom face's vertices
+    points = contact_points(x_all, ints, floats)
+    feet = x[ints[:, 5]] * np.array([1.0, 1.0, 0.0])
+    np.testing.assert_allclose(points, feet, atol=1e-12)

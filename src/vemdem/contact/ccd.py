@@ -396,11 +396,12 @@ def rigid_pair_inverse_masses(x_all, ints, floats, centre, rotation, mass, momen
         w = pair_weights(kind, floats[c, C0], floats[c, C1], w0, D)
         d = np.zeros(3)
         p = np.zeros(3)
+        n_a = 2 if kind == EDGE_EDGE else 1
         for i in range(N_NODES[kind]):
             node = ints[c, NODE0 + i]
             for a in range(3):
                 d[a] += w[i] * x_all[node, a]
-                if w[i] < 0.0:
+                if i >= n_a:  # side B's point (by role: a wall plane's weights take any sign)
                     p[a] -= w[i] * x_all[node, a]
         n = d / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         for side in (GRAIN_A, GRAIN_B):

@@ -146,16 +146,18 @@ def force_on_side_a(ints, local_force) -> np.ndarray:
 
 @njit(cache=True)
 def contact_points(x, ints, floats):
-    """Contact point on side B of every pair (m, 3): sum of -w_i x_i over B's nodes."""
+    """Contact point on side B of every pair (m, 3): sum of -w_i x_i over B's nodes (the nodes
+    after the vertex, or after the first edge). By role, not by the sign of w: a wall plane's
+    triangle is finite, and the projection of a vertex may lie outside it (weights of any sign)."""
     out = np.zeros((len(ints), 3))
     w0 = np.empty(6)
     D = np.empty((6, 2))
     for c in range(len(ints)):
-        w = pair_weights(ints[c, KIND], floats[c, C0], floats[c, C1], w0, D)
-        for i in range(N_NODES[ints[c, KIND]]):
-            if w[i] < 0.0:
-                for a in range(3):
-                    out[c, a] -= w[i] * x[ints[c, NODE0 + i], a]
+        kind = ints[c, KIND]
+        w = pair_weights(kind, floats[c, C0], floats[c, C1], w0, D)
+        for i in range(2 if kind == EDGE_EDGE else 1, N_NODES[kind]):
+            for a in range(3):
+                out[c, a] -= w[i] * x[ints[c, NODE0 + i], a]
     return out
 
 
