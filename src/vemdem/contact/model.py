@@ -93,6 +93,7 @@ class ContactResult:
     trial_history: ContactHistory
     dissipation_power: float  # -F . v of damping and friction at this state (>= 0)
     pair_force: np.ndarray  # (m, 3) physical force on side A of each pair (normal + damping + friction)
+    dissipative: np.ndarray | None = None  # (N, 3) the damping and friction part of `force` (explicit energy books)
 
     @property
     def n_contacts(self) -> int:
@@ -260,6 +261,7 @@ class ContactModel:
         found, c_prev, gt_prev, stick_prev = history.lookup(keys)
         stick_now, gt_now = stick_prev.copy(), np.zeros((len(ints), 3))
         power = 0.0
+        dissipative = np.zeros((self.n_vertices, 3))
         pair_force = force_on_side_a(ints, conservative.local_force)
         if self.friction.active and len(ints):
             v_all = np.zeros_like(x_all)
@@ -274,6 +276,7 @@ class ContactModel:
             scatter_local_forces(ints, local_force, extra)
             residual = residual + extra
             power = float(np.sum(extra * v_all))
+            dissipative = extra[: self.n_vertices]
             pair_force = pair_force + force_on_side_a(ints, local_force)
             if tangent:
                 pair_tangent = pair_tangent + local_tangent
@@ -283,7 +286,7 @@ class ContactModel:
         order = np.argsort(keys, kind="stable")
         trial = ContactHistory(keys[order], trial.c_prev[order], trial.gt[order], trial.stick[order])
         return ContactResult(conservative.total_energy, residual[:N], pair_tangent, ints, floats, reactions, trial, power,
-                             pair_force)  # fmt: skip
+                             pair_force, dissipative)  # fmt: skip
 
     def max_wall_speed(self, t: float) -> float:
         return max((float(np.linalg.norm(w.motion.velocity(t))) for w in self.planes + self.meshes), default=0.0)

@@ -39,6 +39,7 @@ class Run:
     last_contact: object  # the ContactResult at the last frame
     integrator: Integrator
     wall_seconds: float = 0.0
+    out_dir: Path | None = None  # where its frames are (summary: the energy balance from history.csv)
 
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
@@ -90,7 +91,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             stopped = stop is not None and stop(state)
     finally:
         writer.close()
-    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start)
+    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start, out_dir)
 
 
 def _n_frames(duration: float, every: float) -> int:

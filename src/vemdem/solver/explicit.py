@@ -149,6 +149,22 @@ class ExplicitIntegrator:
     def _mesh_velocities(self, t):
         return np.array([m.motion.velocity(t) for m in self.scene.contact.meshes]).reshape(-1, 3)
 
+    def dissipative_residual(self, cr, v) -> np.ndarray:
+        """r_d: the damping, friction and mass-damping part of the residual (minus their force),
+        evaluated with the velocity the step used."""
+        return cr.dissipative + self.params.mass_damping * self.scene.bodies.lumped[:, None] * v
+
+    @staticmethod
+    def step_dissipation(state: State, damping: np.ndarray, v_half: np.ndarray, dt: float) -> float:
+        """Energy the dissipative forces took over the step, as velocity Verlet applies them: each
+        step's kinetic energy changes by dt/2 (F_n + F_n+1) . v_n+1/2 (+ a telescoping dt^2 term),
+        so their work is dt/2 (r_d,n + r_d,n+1) . v_n+1/2; a trapezoid of the powers F_n . v_n-1/2
+        and F_n+1 . v_n+1/2 mixes velocities and left the balance of a dropped grain 1-8 % off."""
+        before = state.bodies.get("dissipative")
+        if before is None:
+            before = damping
+        return 0.5 * dt * float(np.sum((before + damping) * v_half))
+
     def step(self, state: State, dt: float) -> tuple[State, StepInfo]:
         v_half = state.v + 0.5 * dt * state.a
         x = state.x + dt * v_half
@@ -160,17 +176,16 @@ class ExplicitIntegrator:
         if len(cr.ints) and np.min(pair_gaps(cr.floats)) <= 0:
             raise StepRejected("a contact gap closed")
         v = v_half + 0.5 * dt * acc
-        power = cr.dissipation_power + self.params.mass_damping * float(
-            np.sum(self.scene.bodies.lumped[:, None] * v_half**2)
-        )
+        damping = self.dissipative_residual(cr, v_half)
         new = State(
             t1,
             x,
             v,
             acc,
             cr.trial_history,
-            state.dissipated + 0.5 * dt * (state.power + power),
-            power,
+            state.dissipated + self.step_dissipation(state, damping, v_half, dt),
+            float(np.sum(damping * v_half)),
+            {"dissipative": damping},
         )
         info = StepInfo(
             1,
@@ -189,7 +204,7 @@ def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None
     x = scene.bodies.reference.copy() if x0 is None else np.array(x0, float)
     v = np.zeros_like(x) if v0 is None else np.array(v0, float)
     acc, _, cr = integrator.forces(x, v, t0, None)
-    return State(t0, x, v, acc, cr.trial_history)
+    return State(t0, x, v, acc, cr.trial_history, bodies={"dissipative": integrator.dissipative_residual(cr, v)})
 
 
 def advance_explicit(integrator: ExplicitIntegrator, state: State, t_end: float, control: StepControl,

@@ -123,16 +123,20 @@ class RigidExplicit(ExplicitIntegrator):
         return x, v
 
     def loads(self, x, v, centre, velocity, momentum, t, history):
-        """(F, T, contact result) at a placement: contact, gravity, mass damping."""
+        """(F, T, F_d, T_d, contact result) at a placement: force and torque of contact, gravity
+        and mass damping, and their dissipative part (damping, friction, mass damping)."""
         b = self.bodies
         cr = self.scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v)
         F, T = _force_and_torque(x, -cr.force, centre, b.vertex_ptr)
+        Fd, Td = _force_and_torque(x, -cr.dissipative, centre, b.vertex_ptr)
         alpha = self.params.mass_damping
+        Fd -= alpha * b.mass[:, None] * velocity
+        Td -= alpha * momentum
         F += self.gravity_force - alpha * b.mass[:, None] * velocity
         T -= alpha * momentum
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(T))):
             raise StepRejected("non-finite force")
-        return F, T, cr
+        return F, T, Fd, Td, cr
 
     def initial_state(self, x0=None, v0=None, t0: float = 0.0) -> State:
         """Placement fitted to x0 (the reference by default), motion fitted to v0 (rest)."""
@@ -149,9 +153,9 @@ class RigidExplicit(ExplicitIntegrator):
             body_omega = np.einsum("gji,gj->gi", rotation, omega)
             momentum = np.einsum("gij,gj->gi", rotation, b.moments * body_omega)
         x, v = self.vertex_motion(centre, rotation, velocity, momentum)
-        F, T, cr = self.loads(x, v, centre, velocity, momentum, t0, None)
+        F, T, Fd, Td, cr = self.loads(x, v, centre, velocity, momentum, t0, None)
         bodies = {"centre": centre, "rotation": rotation, "velocity": velocity, "momentum": momentum,
-                  "force": F, "torque": T}  # fmt: skip
+                  "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
         return State(t0, x, v, np.zeros_like(x), cr.trial_history, bodies=bodies)
 
     # ------------------------------------------------------------------ the step
@@ -179,21 +183,25 @@ class RigidExplicit(ExplicitIntegrator):
         x, v_half = self.vertex_motion(centre, rotation, velocity, momentum)
         t1 = state.t + dt
         try:
-            F, T, cr = self.loads(x, v_half, centre, velocity, momentum, t1, state.history)
+            F, T, Fd, Td, cr = self.loads(x, v_half, centre, velocity, momentum, t1, state.history)
         except PenetrationError as exc:
             raise StepRejected(str(exc)) from None
         if len(cr.ints) and np.min(cr.floats[:, 2]) <= 0:
             raise StepRejected("a contact gap closed")
-        alpha = self.params.mass_damping
-        power = cr.dissipation_power + alpha * float(np.sum(b.mass * np.sum(velocity**2, axis=1))
-                                                     + np.sum(momentum * angular_velocity(rotation, momentum, b.moments)))  # fmt: skip
+        # the work of the dissipative loads as the step applies them (velocity Verlet's identity,
+        # solver/explicit.py step_dissipation): dt/2 (F_d,n + F_d,n+1) . v_c and the same for the
+        # torques with the half-step angular velocity before and after the rotation
+        omega_before = angular_velocity(s["rotation"], momentum, b.moments)
+        omega_after = angular_velocity(rotation, momentum, b.moments)
+        work = 0.5 * dt * float(np.sum((s["damping_force"] + Fd) * velocity)
+                                + np.sum(s["damping_torque"] * omega_before) + np.sum(Td * omega_after))  # fmt: skip
+        power = -float(np.sum(Fd * velocity) + np.sum(Td * omega_after))
         velocity = velocity + 0.5 * dt * F / b.mass[:, None]
         momentum = momentum + 0.5 * dt * T
         x, v = self.vertex_motion(centre, rotation, velocity, momentum)
         bodies = {"centre": centre, "rotation": rotation, "velocity": velocity, "momentum": momentum,
-                  "force": F, "torque": T}  # fmt: skip
-        new = State(t1, x, v, np.zeros_like(x), cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power),
-                    power, bodies)  # fmt: skip
+                  "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
+        new = State(t1, x, v, np.zeros_like(x), cr.trial_history, state.dissipated - work, power, bodies)
         info = StepInfo(1, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr)
         return new, info
 
