@@ -37,6 +37,7 @@ def settled(tmp_path_factory):
 
 def test_pack_settles_without_overlap_and_reports_its_height(settled):
     out, summary = settled
+    assert (out / "pack_3d.png").stat().st_size > 10_000  # the 3D view of the pack
     assert summary["settled"] and summary["kinetic_ratio"] < 1e-3
     state = load_state(out / "state.npz")
     assert len(state.grains) == summary["n_grains"] == 16
@@ -73,6 +74,7 @@ def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
     low_dir, low = collapse(tmp_path, settled, 0.3, 0.2)
     for out, s in ((high_dir, high), (low_dir, low)):
         assert (out / "pile.png").stat().st_size > 10_000
+        assert (out / "pile_3d.png").stat().st_size > 10_000  # the 3D view of the heap
         assert s["runout"] > 0  # grains left the footprint of the removed walls
         assert s["pile_height"] < pack_top  # the walls went: the heap is lower than the pack was
         final = load_state(out / "state.npz")

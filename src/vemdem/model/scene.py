@@ -46,6 +46,13 @@ class Scene:
                                friction, planes=planes, meshes=meshes)  # fmt: skip
         return cls(list(grains), material, bodies, contact, np.asarray(gravity, float), float(mass_scaling))
 
+    def surface_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """(faces, face_grain): the grains' surface triangles (indices into the vertex positions)
+        and the grain of each, walls left out (pictures)."""
+        topo = self.contact.topology
+        mine = topo.face_grain < self.n_grains
+        return topo.faces[mine], topo.face_grain[mine]
+
     @property
     def n_vertices(self) -> int:
         return self.bodies.n_vertices

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from ..analysis.pack import pack_measures
+from ..analysis.plots import plot_grains_3d
 from ..config import ConfigError, tables
 from ..config.build import resolve_path, scene_from, solver_options_from
 from ..contact.walls import box_walls
@@ -72,6 +73,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         **measures,
     }
     save_state(out_dir / "state.npz", packing.grains, state.x, state.v, meta)
+    plot_grains_3d(out_dir / "pack_3d.png", state.x, *scene.surface_triangles(),
+                   title=f"the settled pack: {scene.n_grains} grains", floor_z=packing.floor)  # fmt: skip
     summary = run_summary("pack", scene, result, t_start)
     summary.update(measures)
     summary["settled"] = result.stopped_early

@@ -6,7 +6,7 @@ settle.max_time. The angle of repose is measured from the final free surface
 (analysis.repose: a line fitted to the tops of the surface grains on the flank, its uncertainty
 from the spread between azimuthal sectors and the fit; docs/repose.md). Outputs in DIR:
 summary.json (angle_of_repose_deg, angle_of_repose_uncertainty_deg, pile_height, runout, ...),
-pile.png (side view with the fitted slope), state.npz (the final pile), and the scene outputs
+pile.png (side view with the fitted slope), pile_3d.png (3D view), state.npz (the final pile), and the scene outputs
 (history.csv, grains.csv, walls.csv, grains.pvd, checkpoint.npz; `--resume` continues a run).
 """
 
@@ -15,6 +15,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..analysis.plots import plot_grains_3d
 from ..analysis.repose import measure_pile, plot_heap, plot_pile
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
@@ -57,6 +58,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     else:
         plot_heap(centroids, tuple(meta["centre"]), out_dir / "pile.png", title,
                   note=f"no angle of repose: {figures['angle_of_repose_error']}")  # fmt: skip
+    plot_grains_3d(out_dir / "pile_3d.png", state.x, *scene.surface_triangles(), title=f"the heap: {title}",
+                   floor_z=meta["floor"])  # fmt: skip
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
                {**meta, "scenario": "pile_collapse", "time": state.t})  # fmt: skip
     summary = run_summary("pile_collapse", scene, result, t_start)
