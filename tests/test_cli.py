@@ -108,3 +108,15 @@ def test_failed_run_exits_1_and_keeps_what_it_wrote(tmp_path, cli):
     assert "Newton did not converge" in err and str(tmp_path / "out") in err
     rows = (tmp_path / "out/force_strain.csv").read_text().splitlines()
     assert rows[0] == "strain,force" and len(rows) >= 2
+
+
+def test_first_run_says_the_kernels_are_compiling(tmp_path, cli, monkeypatch):
+    """A fresh install spends a minute or two compiling before the first output: say so, once."""
+    from vemdem import cli as cli_module
+
+    assert cli_module._kernels_compiled()  # this test session has compiled them
+    monkeypatch.setattr(cli_module, "_kernels_compiled", lambda: False)
+    code, _, err = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "out")
+    assert code == 0 and "compiling the numerical kernels" in err
+    code, _, err = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "quiet", "--quiet")
+    assert code == 0 and "compiling" not in err

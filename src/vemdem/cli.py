@@ -135,7 +135,21 @@ def _remove_if_empty(out: Path, created: bool) -> None:
         out.rmdir()
 
 
+def _kernels_compiled() -> bool:
+    """Whether numba has cached the element kernels (beside the sources, or in NUMBA_CACHE_DIR)."""
+    from pathlib import Path as _Path
+
+    import numba
+
+    places = [_Path(__file__).parent / "vem" / "__pycache__"]
+    if numba.config.CACHE_DIR:
+        places.append(_Path(numba.config.CACHE_DIR))
+    return any(any(p.rglob("element._evaluate_grains-*.nbi")) for p in places if p.is_dir())
+
+
 def cmd_run(args) -> int:
+    if not args.quiet and not _kernels_compiled():
+        print("vemdem: compiling the numerical kernels (once per install, one to two minutes) ...", file=sys.stderr)
     try:
         cfg, module = checked_config(load_toml(args.config))
         if args.resume and not getattr(module, "RESUMABLE", False):
