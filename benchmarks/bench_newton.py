@@ -1,6 +1,7 @@
 """One implicit Newton iteration, split by piece, against the number of grains (issue 14).
 
     python benchmarks/bench_newton.py [--grains 515,4096] [--dt 1e-4,1e-3] [--state PATH/state.npz]
+                                      [--run CONFIG.toml:DIR/checkpoint.npz]
                                       [--solvers direct,grain-block] [--repeat 3] [--json PATH]
 
 Packs: bench_dynamics.py's geometric deposits (loose stacks, every grain resting on a point of the
@@ -15,7 +16,8 @@ of one Newton iteration at the same state (best of --repeat, wall seconds on thi
     factor      the linear solver's set-up (block LU + coarse space, or SuperLU)
     solve       the solve to a relative residual 1e-8 (GMRES iterations reported)
 
-and the exponent p of cost ~ N^p between the smallest and the largest pack. Nothing asserts a
+and the exponent p of cost ~ N^p between the smallest and the largest pack. A GMRES solve that
+does not reach 1e-8 in 200 iterations is reported as krylov -1 (solve nan). Nothing asserts a
 timing; results and their reading: docs/linear-solvers.md.
 """
 
@@ -33,7 +35,7 @@ from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.walls import box_walls
 from vemdem.io.state import load_state
 from vemdem.model.scene import Scene
-from vemdem.solver.linear import NewtonSystem, make_linear_solver
+from vemdem.solver.linear import LinearSolveDiverged, NewtonSystem, make_linear_solver
 from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newton_blocks
 from vemdem.solver.state import RunStats, State, StepControl
 from vemdem.vem.material import Material
@@ -60,6 +62,25 @@ def state_case(path: Path):
     scene = Scene.build(s.grains, material, law, friction, planes=walls)
     a = np.zeros_like(s.x)
     return f"settled {len(s.grains)}", scene, State(0.0, s.x.copy(), s.v.copy(), a)
+
+
+def run_case(config: Path, checkpoint: Path):
+    """A `vemdem run` in progress (or done): its config and DIR/checkpoint.npz, e.g. the falling,
+    contact-rich 515-grain paper-pack-implicit (several contacts per grain, friction history on)."""
+    import tomllib
+
+    from vemdem.config.build import scene_from
+    from vemdem.contact.model import ContactHistory
+    from vemdem.scenarios import pack as pack_scenario
+    from vemdem.scenarios.registry import checked_config
+
+    cfg, _ = checked_config(tomllib.loads(config.read_text()))
+    packing = pack_scenario.place(cfg)
+    scene = scene_from(packing.grains, cfg, box_walls(*packing.box))
+    with np.load(checkpoint) as d:
+        history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
+        state = State(float(d["t"]), d["x"].copy(), d["v"].copy(), d["a"].copy(), history)
+    return f"run {scene.n_grains} t={state.t:.3g}", scene, state
 
 
 def best(f, repeat):
@@ -91,11 +112,15 @@ def measure(scene, state, dt, solver_name, repeat):
     solver = make_linear_solver(solver_name)
     rhs = np.random.default_rng(0).normal(size=system.n)
     t_f, _ = best(lambda: solver.factor(system), repeat)
-    t_s, _ = best(lambda: solver.solve(rhs, 1e-8), repeat)
+    try:
+        t_s, _ = best(lambda: solver.solve(rhs, 1e-8), repeat)
+        krylov = solver.stats.last_iterations
+    except LinearSolveDiverged:  # reported, not fatal: GMRES's limit is part of the measurement
+        t_s, krylov = np.nan, -1
     grain_pairs = {(min(a, b), max(a, b)) for a, b in cr.ints[:, 1:3].tolist()}
     return {
         "element": t_el, "contact": t_c, "assembly": t_asm, "factor": t_f, "solve": t_s,
-        "total": t_el + t_c + t_asm + t_f + t_s, "krylov": solver.stats.last_iterations,
+        "total": t_el + t_c + t_asm + t_f + t_s, "krylov": krylov,
         "contacts_per_grain": 2 * len(grain_pairs) / scene.n_grains, "pairs": cr.n_contacts,
     }  # fmt: skip
 
@@ -105,12 +130,15 @@ def main():
     p.add_argument("--grains", default="515,4096")
     p.add_argument("--dt", default="1e-4,1e-3")
     p.add_argument("--state", type=Path, action="append", default=[])
+    p.add_argument("--run", action="append", default=[], metavar="CONFIG.toml:DIR/checkpoint.npz",
+                   help="a pack run's config and checkpoint (its state at that time)")
     p.add_argument("--solvers", default="direct,grain-block")
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     cases = [deposit_case(int(n)) for n in args.grains.split(",") if n]
     cases += [state_case(path) for path in args.state]
+    cases += [run_case(*(Path(part) for part in spec.split(":", 1))) for spec in args.run]
     rows = []
     print(f"{'pack':>14} {'dt':>7} {'solver':>11} {'c/grain':>7} {'element':>8} {'contact':>8} {'assembly':>8} "
           f"{'factor':>8} {'solve':>8} {'total ms':>9} {'krylov':>6}")  # fmt: skip
