@@ -145,7 +145,7 @@ def test_pile_height_and_runout_from_constructed_grains():
     stray = [CENTRE[0], CENTRE[1] - 25 * D, D / 2]
     result = angle_of_repose(np.vstack([centroids, perched, stray]), D, centre=CENTRE)
     assert result.pile_height == pytest.approx(perched[2] + D / 2)
-    assert result.runout == pytest.approx(25 * D)
+    assert result.extent == pytest.approx(25 * D)
     assert result.runout_from(4e-3) == pytest.approx(25 * D - 4e-3)
 
 
@@ -162,7 +162,7 @@ def test_runout_of_a_heap_is_its_toe_radius():
     result = angle_of_repose(centroids, D, centre=CENTRE)
     # the outermost column lies within one lattice spacing (plus jitter) inside the toe circle
     toe = base + TOE_WIDTH
-    assert toe - D - 2 * JITTER <= result.runout <= toe
+    assert toe - D - 2 * JITTER <= result.extent <= toe
 
 
 def test_vertices_give_the_grain_tops():

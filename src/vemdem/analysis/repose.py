@@ -45,9 +45,9 @@ measures both and keeps the one whose line fits the flank with the smaller resid
 heap that kept its box's square plan is not read as a cone with gentle diagonals. The box
 walls are taken parallel to x and y.
 
-Pile height is the highest grain top above the floor. Runout is the largest horizontal
-(Euclidean) distance of a grain centroid from the axis: the heap's radial extent, which
-includes the column's own half width; `ReposeResult.runout_from(half_width)` subtracts it.
+Pile height is the highest grain top above the floor. The heap's extent is the largest horizontal
+(Euclidean) distance of a grain centroid from the axis; its runout (one definition everywhere,
+`runout`) is that extent beyond the column's half width, 0 for a pile that did not spread.
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ class ReposeResult:
     sector_angles_deg: np.ndarray
     intercept: float
     pile_height: float
-    runout: float
+    extent: float  # largest horizontal distance of a centroid from the axis
     profile_r: np.ndarray
     profile_h: np.ndarray
     used_mask: np.ndarray
@@ -102,8 +102,8 @@ class ReposeResult:
     floor: float
 
     def runout_from(self, initial_half_width: float) -> float:
-        """How far the heap ran out beyond the column it started as."""
-        return self.runout - initial_half_width
+        """How far the heap ran out beyond the column it started as (`runout`)."""
+        return runout(self.extent, initial_half_width)
 
 
 @dataclass(frozen=True)
@@ -301,7 +301,7 @@ def _measure(
         sector_angles_deg=sector_angles,
         intercept=line.intercept,
         pile_height=float(tops.max() - floor),
-        runout=float(np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]).max()),
+        extent=float(np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]).max()),
         profile_r=r,
         profile_h=h,
         used_mask=used,
@@ -358,6 +358,11 @@ def angle_of_repose(
     return min(measured, key=lambda pair: pair[1])[0]
 
 
+def runout(extent: float, half_width: float) -> float:
+    """THE runout: how far the heap's extent reaches beyond the column's half width."""
+    return extent - half_width
+
+
 def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict):
     """(ReposeResult or None, summary figures) of a settled pile at vertex positions x.
     pile_height: highest grain top above the floor; runout: largest horizontal distance of a grain
@@ -365,8 +370,8 @@ def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray,
     also for a heap too flat for an angle, which gets angle_of_repose_deg = None and the reason."""
     centre = tuple(meta.get("centre", (0.0, 0.0)))
     floor = meta.get("floor", 0.0)
-    spread = float(np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1]).max())
-    figures = {"pile_height": float(x[:, 2].max() - floor), "runout": spread - 0.5 * min(meta["box"])}
+    extent = float(np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1]).max())
+    figures = {"pile_height": float(x[:, 2].max() - floor), "runout": runout(extent, 0.5 * min(meta["box"]))}
     try:
         result = angle_of_repose(centroids, grain_size, vertices=x, vertex_grain=vertex_grain, floor=floor,
                                  centre=centre)  # fmt: skip
