@@ -53,7 +53,7 @@ def _approach(trans, spread, a, b):
 
 
 @njit(cache=True)
-def _node_approach(ints, c, node_disp, node_extra):
+def _node_approach(ints, c, node_disp, node_extra, extra_factor=1.0):
     """How much closer the pair's own features can come: the distance from a point to a triangle
     (or between segments) falls by at most the largest relative displacement of a node of one
     side and a node of the other, max |u_p - u_q| <= |dx_p - dx_q| + e_p + e_q (e: what the
@@ -76,7 +76,7 @@ def _node_approach(ints, c, node_disp, node_extra):
                 e += node_extra[p]
             if q < n_vertices:
                 e += node_extra[q]
-            move = max(move, np.sqrt(d2) + e)
+            move = max(move, np.sqrt(d2) + extra_factor * e)
     return move
 
 
@@ -163,24 +163,8 @@ def accd_alpha(ints, x_all, n_vertices, plane_node0, dx, vertex_grain, c, t, phi
     for c_ in range(len(ints)):
         kind = ints[c_, KIND]
         nn = N_NODES[kind]
-        n_a = 2 if kind == EDGE_EDGE else 1
         plane = kind == VERTEX_FACE and ints[c_, NODE0 + 1] >= plane_node0
-        rate = 0.0
-        for i in range(n_a):
-            p = ints[c_, NODE0 + i]
-            for j in range(n_a, nn):
-                q = ints[c_, NODE0 + j]
-                d2 = 0.0
-                e = 0.0
-                for k in range(3):
-                    up = dx[p, k] if p < n_vertices else 0.0
-                    uq = dx[q, k] if q < n_vertices else 0.0
-                    d2 += (up - uq) ** 2
-                if p < n_vertices:
-                    e += excess[p]
-                if q < n_vertices:
-                    e += excess[q]
-                rate = max(rate, np.sqrt(d2) + 2.0 * e)
+        rate = _node_approach(ints, c_, dx, excess, 2.0)
         if rate <= 0.0:
             continue
         for k in range(nn):

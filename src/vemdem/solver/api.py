@@ -83,12 +83,13 @@ class ExplicitCentral:
 
     name = "explicit"
     lumped = True
+    integrator_class = ExplicitIntegrator
 
     def __init__(self, scene: Scene, options: SolverOptions):
         self.scene = scene
         self.control = _control(options)
-        self.integrator = ExplicitIntegrator(scene, ExplicitParameters(safety=options.safety,
-                                                                       mass_damping=options.mass_damping))  # fmt: skip
+        self.integrator = self.integrator_class(scene, ExplicitParameters(safety=options.safety,
+                                                                          mass_damping=options.mass_damping))  # fmt: skip
 
     def initial_state(self, x0=None, v0=None) -> State:
         return explicit_initial_state(self.scene, self.integrator, x0=x0, v0=v0)
@@ -102,12 +103,7 @@ class RigidCentral(ExplicitCentral):
     the consistent mass, exact for rigid motions."""
 
     lumped = False
-
-    def __init__(self, scene: Scene, options: SolverOptions):
-        self.scene = scene
-        self.control = _control(options)
-        self.integrator = RigidExplicit(scene, ExplicitParameters(safety=options.safety,
-                                                                  mass_damping=options.mass_damping))  # fmt: skip
+    integrator_class = RigidExplicit
 
     def initial_state(self, x0=None, v0=None) -> State:
         return self.integrator.initial_state(x0, v0)
