@@ -5,11 +5,14 @@
     a4 = gamma/(beta dt), a5 = 1 - gamma/beta, a6 = dt (1 - gamma/(2 beta))
     R(x) = M a + f_int(x) + r_contact(x, v) - f_gravity = 0,   K = a1 M + K_int + K_contact
 
-Every Newton update is shortened, if needed, so that no vertex can reach another grain or a wall
-within the step (a conservative continuous-collision bound: the distance between two grains is at
-least their smallest active gap, or the activation gap when none is active), so an accepted state
-never crosses the barrier. A step is rejected when Newton does not converge, a value is not finite,
-or the search at the end of the step finds a new pair already inside the activation gap.
+Each Newton update moves every grain along its fitted rigid motion, the rotation applied as a
+finite rotation (model/motion.py: a linearised rotation stretches a 90 GPa grain and costs Newton
+iterations), and is shortened, if needed, so that no surface can reach another within it:
+additive CCD for every feature pair the update can bring near (contact.ccd.accd_alpha), a bound
+from the start of the update for the rest (_update_share); an accepted state never crosses the
+barrier. A step is rejected when Newton does not converge, a value is not finite, the search at
+the end of the step finds a new pair already inside the activation gap, or (advance) the total
+energy grew (docs/dynamics.md).
 """
 
 from __future__ import annotations
