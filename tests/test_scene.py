@@ -151,3 +151,15 @@ def test_summary_energy_balance_never_shows_a_gain(tmp_path, solver):
     start = sum(float(first[i]) for i in (1, 2, 3, 4))
     assert e["start"] == pytest.approx(start, rel=1e-12)
     assert e["dissipated"] == pytest.approx(float(last[5]) - float(first[5]), rel=1e-12, abs=1e-30)
+
+
+def test_rejected_steps_are_counted_by_cause():
+    from vemdem.solver.state import RunStats, StepRejected
+
+    stats = RunStats()
+    stats.reject(StepRejected("Newton did not converge in 15 iterations"))
+    stats.reject(StepRejected("the total energy grew by 1e-9 J in one step (tolerance 1e-10 J)"))
+    stats.reject(StepRejected("Newton did not converge in 15 iterations"))
+    stats.reject(StepRejected("vertex 3 (grain 0) is behind wall 'floor'"))
+    assert stats.rejected == 4
+    assert stats.rejections == {"newton": 2, "energy": 1, "behind_wall": 1}

@@ -29,6 +29,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
              krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint,
+             rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -49,6 +50,9 @@ def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
             control.easy_streak = int(d["easy_streak"])
             krylov = int(d["krylov"]) if "krylov" in d.files else 0
             stats = RunStats(int(d["accepted"]), int(d["rejected"]), int(d["newton"]), krylov)
+            if "rejections" in d.files:
+                stats.rejections = json.loads(str(d["rejections"]))
+                stats.energy_gains = int(d["energy_gains"])
             frame = int(d["frame"])
     except CheckpointError:
         raise

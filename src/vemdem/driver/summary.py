@@ -53,6 +53,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_vertices": scene.n_vertices,
         "n_steps": stats.accepted,
         "n_rejected_steps": stats.rejected,
+        "rejections": dict(sorted(stats.rejections.items())),  # by cause: newton, energy, missed_pairs, ...
         "n_newton_iterations": stats.newton_iterations,
         "n_krylov_iterations": stats.krylov_iterations,
         "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),

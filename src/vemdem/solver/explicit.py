@@ -226,8 +226,7 @@ def advance_explicit(integrator: ExplicitIntegrator, state: State, t_end: float,
                 new, info = integrator.step(state, h)
                 break
             except StepRejected as exc:
-                stats.rejected += 1
-                stats.last_rejection = str(exc)
+                stats.reject(exc)
                 h *= 0.5
         state = new
         ints, floats = info.ints, info.floats

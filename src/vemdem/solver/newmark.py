@@ -363,8 +363,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
                     stats.energy_gains += 1
                 energy = new_energy
         except (StepRejected, np.linalg.LinAlgError) as exc:
-            stats.rejected += 1
-            stats.last_rejection = str(exc)
+            stats.reject(exc)
             control.dt = 0.5 * h
             control.easy_streak = 0
             if control.dt < control.dt_min:

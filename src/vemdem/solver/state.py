@@ -80,3 +80,22 @@ class RunStats:
     krylov_iterations: int = 0
     last_rejection: str = ""
     energy_gains: int = 0  # implicit: steps accepted below 1e-3 dt_max although the energy grew
+    rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
+
+    def reject(self, exc: BaseException) -> None:
+        """Count a rejected step under its cause."""
+        self.rejected += 1
+        self.last_rejection = str(exc)
+        cause = rejection_cause(exc)
+        self.rejections[cause] = self.rejections.get(cause, 0) + 1
+
+
+def rejection_cause(exc: BaseException) -> str:
+    """A short name for why a step was rejected (summary.json "rejections")."""
+    text = str(exc)
+    for cause, marker in (("newton", "Newton did not converge"), ("energy", "total energy grew"),
+                          ("missed_pairs", "appeared inside the activation gap"), ("behind_wall", "behind wall"),
+                          ("inverted_element", "invert"), ("gap_closed", "gap closed"), ("non_finite", "non-finite")):  # fmt: skip
+        if marker in text:
+            return cause
+    return "linear_solver" if isinstance(exc, ArithmeticError) else "other"
