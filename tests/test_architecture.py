@@ -23,7 +23,7 @@ ALLOWED = {
                   "analysis", "contact.walls"},  # fmt: skip
     "verification": {"solver", "model", "vem", "geometry", "scenarios.plates"},
     "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep"},
-    "sweep": {"config", "scenarios.registry", "analysis.plots"},
+    "sweep": {"config", "scenarios.registry", "analysis.seeds"},
 }
 # finer rules inside a room
 FORBIDDEN = {

@@ -27,6 +27,7 @@ import numpy as np
 
 from .config import ConfigError
 from .config.build import resolve_path
+from .analysis.seeds import seed_statistics, varies
 from .scenarios.registry import checked_config
 
 Scalar = bool | int | float | str
@@ -43,6 +44,10 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 MAX_NAME = 100
 # Timings differ from run to run whatever the parameters: never the default thing to plot.
 NOT_PLOTTED = {"wall_seconds"}
+# The key of the random pack: a sweep over it is a set of repeats, summarised by mean and spread.
+SEED = "seed"
+PROGRESS_POLL = 2.0  # s between looks at the running cases' progress
+PROGRESS_FILE = "progress.txt"  # a running case's last progress line, shown by the sweep's bar
 
 
 @dataclass(frozen=True)
@@ -105,17 +110,19 @@ def parse_sets(texts: list[str]) -> dict[str, list[Scalar]]:
 
 
 def case_grid(sweeps: dict[str, list[Scalar]], zipped: bool) -> list[dict[str, Scalar]]:
-    """The parameter sets of the cases, in case order."""
+    """The parameter sets of the cases, in case order. `seed` is never zipped: with --zip the other
+    lists are paired and every pair runs with every seed (seed varying fastest)."""
     keys = list(sweeps)
     if zipped:
-        lengths = {len(v) for v in sweeps.values()}
+        paired = {k: v for k, v in sweeps.items() if k != SEED}
+        lengths = {len(v) for v in paired.values()}
         if len(lengths) > 1:
-            given = ", ".join(f"{k}: {len(v)}" for k, v in sweeps.items())
+            given = ", ".join(f"{k}: {len(v)}" for k, v in paired.items())
             raise ConfigError(f"--zip needs value lists of equal length, got {given}")
-        combos = zip(*sweeps.values())
-    else:
-        combos = itertools.product(*sweeps.values())
-    return [dict(zip(keys, combo)) for combo in combos]
+        seeds = sweeps.get(SEED, [None])
+        grid = [{**dict(zip(paired, combo)), SEED: seed} for combo in zip(*paired.values()) for seed in seeds]
+        return [{k: params[k] for k in keys} for params in grid]
+    return [dict(zip(keys, combo)) for combo in itertools.product(*sweeps.values())]
 
 
 def _slot(node: Any, part: str, key: str) -> tuple[dict | list, str | int]:
@@ -220,10 +227,38 @@ def run_case(raw_config: dict, out_dir: str, base_dir: str) -> dict:
     """Run one case on a Dask worker. Never raises: one broken case must not end the sweep."""
     try:
         cfg, module = checked_config(raw_config)
-        summary = module.run(cfg, Path(out_dir), base_dir=Path(base_dir), progress=None)
+        summary = module.run(cfg, Path(out_dir), base_dir=Path(base_dir), progress=_progress_file(Path(out_dir)))
         return {**flatten(summary), "status": "ok"}
     except Exception as exc:  # noqa: BLE001 - whatever went wrong belongs in this case's row
         return _failure(exc)
+
+
+def _progress_file(folder: Path):
+    """A scenario's progress callback that keeps the case's last line in DIR/case/progress.txt,
+    replaced atomically, where the sweep's own progress bar reads it (same file system)."""
+    path, tmp = folder / PROGRESS_FILE, folder / (PROGRESS_FILE + ".tmp")
+
+    def progress(i: int, n: int, text: str = "") -> None:
+        try:
+            tmp.write_text(f"{i}/{n} {text}".strip())
+            tmp.replace(path)
+        except OSError:
+            pass  # progress is a courtesy: a full disk must fail the case where it writes results
+
+    return progress
+
+
+def running_line(out: Path, cases: list[Case], done: set[int]) -> str:
+    """`case_003: 12/40 t = 0.06 s ...` for the running cases that have reported progress."""
+    lines = []
+    for i, case in enumerate(cases):
+        path = out / case.name / PROGRESS_FILE
+        if i not in done and path.exists():
+            try:
+                lines.append(f"{case.name.split('_')[1]}: {path.read_text()[:60]}")
+            except OSError:
+                continue
+    return "; ".join(lines)
 
 
 DASHBOARD = "127.0.0.1:8787"  # the local cluster's dashboard: this machine only, unless --dashboard says otherwise
@@ -261,7 +296,7 @@ def run_cases(
     dashboard: str = DASHBOARD,
 ) -> list[dict]:
     """Results in case order, whatever order the workers finish in."""
-    from dask.distributed import as_completed
+    from dask.distributed import wait
     from tqdm import tqdm
 
     results: list[dict] = [{} for _ in cases]
@@ -274,12 +309,22 @@ def run_cases(
             pure=False,  # a re-run on a shared cluster must run again, not reuse a cached result
         )
         index = {future.key: i for i, future in enumerate(futures)}
+        done: set[int] = set()
         with tqdm(total=len(cases), file=sys.stderr, disable=quiet, unit="case", dynamic_ncols=True) as bar:
-            for future in as_completed(futures):
-                i = index[future.key]
-                results[i] = _result(future)
-                bar.set_postfix_str(f"{cases[i].name}: {results[i]['status']}", refresh=False)
-                bar.update()
+            pending = set(futures)
+            while pending:
+                try:
+                    finished, pending = wait(list(pending), timeout=None if quiet else PROGRESS_POLL,
+                                             return_when="FIRST_COMPLETED")  # fmt: skip
+                except TimeoutError:  # nothing finished yet: only the progress line to renew
+                    finished = set()
+                for future in finished:
+                    i = index[future.key]
+                    results[i] = _result(future)
+                    done.add(i)
+                    bar.update()
+                if not quiet:
+                    bar.set_postfix_str(running_line(out, cases, done), refresh=True)
     return results
 
 
@@ -287,15 +332,38 @@ def summary_columns(results: list[dict], taken: set[str]) -> list[str]:
     return sorted({key for result in results for key in result} - taken)
 
 
+def seeded(cases: list[Case]) -> bool:
+    return bool(cases) and SEED in cases[0].params
+
+
+def _ok_rows(cases: list[Case], results: list[dict]) -> list[dict]:
+    return [{**result, **case.params} for case, result in zip(cases, results) if result.get("status") == "ok"]
+
+
+def seed_rows(cases: list[Case], results: list[dict]) -> list[dict]:
+    """The `mean` and `std` rows of a sweep over seeds: one pair per setting of the other keys."""
+    others = [k for k in cases[0].params if k != SEED]
+    numeric = [{k: v for k, v in row.items() if k != SEED} for row in _ok_rows(cases, results)]
+    rows = []
+    for group in seed_statistics(numeric, others):
+        for stat, values in (("mean", group.mean), ("std", group.std)):
+            rows.append({**values, **group.setting, "case": stat, "status": stat, "n_seeds": group.n})
+    return rows
+
+
 def write_table(path: Path, cases: list[Case], results: list[dict]) -> None:
+    """One row per case; a sweep over seeds adds a `mean` and a `std` row per setting of the other
+    keys (their `seed` cell empty, `n_seeds` the successful seeds behind them)."""
     keys = list(cases[0].params)
     fixed = ["case", *keys, "status", "error"]
-    header = fixed + summary_columns(results, set(fixed))
+    extra = seed_rows(cases, results) if seeded(cases) else []
+    header = fixed + summary_columns(results + extra, set(fixed))
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, header, lineterminator="\n")
         writer.writeheader()
         for case, result in zip(cases, results):
             writer.writerow({**result, "case": case.name, **case.params, "error": result.get("error", "")})
+        writer.writerows(extra)
 
 
 def _is_number(value: Any) -> bool:
@@ -304,36 +372,43 @@ def _is_number(value: Any) -> bool:
 
 def default_plot_y(scenario: str, ok: list[dict]) -> str | None:
     """The headline figure of a scenario, else the first numeric summary field (in the scenario's
-    order) that the sweep changes; measured floats before integers, which are mostly counts."""
+    order) that the sweep changes by more than round-off; measured floats before integers, which
+    are mostly counts."""
     if scenario == "pile_collapse" and any("angle_of_repose_deg" in r for r in ok):
         return "angle_of_repose_deg"
     varying = []
     for key in ok[0] if ok else []:
         values = [r[key] for r in ok if key in r]
-        if key not in NOT_PLOTTED and all(_is_number(v) for v in values) and len(set(values)) > 1:
+        if key not in NOT_PLOTTED and all(_is_number(v) for v in values) and varies(values):
             varying.append((all(isinstance(v, int) for v in values), key))
     return min(varying, key=lambda item: item[0])[1] if varying else None
+
+
+def _default_x(keys: list[str]) -> str:
+    """The last swept key, the seed only when nothing else is swept (seeds are repeats, not a trend)."""
+    return next((k for k in reversed(keys) if k != SEED), keys[-1])
 
 
 def plot_sweep(
     path: Path, cases: list[Case], results: list[dict], zipped: bool, x: str | None = None, y: str | None = None
 ) -> str:
-    """Plot y against x for the cases that ran; returns a line saying what was drawn, or why not."""
+    """Plot y against x for the cases that ran; returns a line saying what was drawn, or why not.
+    Over seeds: each seed a faint dot, their mean with a one-standard-deviation bar."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     keys = list(cases[0].params)
-    ok = [(case, result) for case, result in zip(cases, results) if result.get("status") == "ok"]
-    x = x or keys[-1]
-    y = y or default_plot_y(str(cases[0].raw.get("scenario", "")), [result for _, result in ok])
-    rows = [{**result, **case.params} for case, result in ok]
+    x = x or _default_x(keys)
+    rows = _ok_rows(cases, results)
+    y = y or default_plot_y(str(cases[0].raw.get("scenario", "")), [r for r in rows])
     rows = [r for r in rows if y and _is_number(r.get(x)) and _is_number(r.get(y))]
     if not rows:
         path.unlink(missing_ok=True)  # a plot left by an earlier sweep in DIR would pass for this one's
         return f"no plot: no successful case has numeric values of {x} and {y or 'a varying summary field'}"
+    over_seeds = SEED in keys and x != SEED
     # A product sweep is a family of curves, one per setting of the other swept keys; in a zipped
-    # sweep all keys move together, so it is one curve.
-    others = [k for k in keys if k != x] if not zipped and x in keys else []
+    # sweep all keys but the seed move together, so it is one curve.
+    others = [k for k in keys if k not in (x, SEED)] if not zipped and x in keys else []
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault(tuple(row[k] for k in others), []).append(row)
@@ -341,14 +416,46 @@ def plot_sweep(
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     for group, members in groups.items():
-        members.sort(key=lambda r: r[x])
         label = ", ".join(f"{k}={_label(v)}" for k, v in zip(others, group)) or None
-        ax.plot([r[x] for r in members], [r[y] for r in members], "o-", ms=4, label=label)
+        if over_seeds:
+            _plot_seed_means(ax, members, x, y, label)
+        else:
+            members.sort(key=lambda r: r[x])
+            ax.plot([r[x] for r in members], [r[y] for r in members], "o-", ms=4, label=label)
+    if x == SEED and len(rows) > 1:
+        _mean_band(ax, [r[y] for r in rows])
+    _no_round_off_trend(ax, [r[y] for r in rows])
     ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    ax.set_ylabel(f"{y} (mean and std over seeds)" if over_seeds else y)
     ax.grid(alpha=0.3)
-    if others:
+    if others or x == SEED:
         ax.legend(fontsize="small")
     fig.tight_layout()
     fig.savefig(path)
-    return f"plot: {path} ({y} against {x})"
+    return f"plot: {path} ({y} against {x}{', mean and spread over seeds' if over_seeds else ''})"
+
+
+def _plot_seed_means(ax, members: list[dict], x: str, y: str, label: str | None) -> None:
+    at = sorted({r[x] for r in members})
+    ys = [np.array([r[y] for r in members if r[x] == xv], dtype=float) for xv in at]
+    line = ax.errorbar(at, [v.mean() for v in ys], yerr=[v.std(ddof=1) if v.size > 1 else 0.0 for v in ys],
+                       fmt="o-", ms=5, capsize=3, label=label)  # fmt: skip
+    colour = line.lines[0].get_color()
+    ax.plot([r[x] for r in members], [r[y] for r in members], ".", color=colour, alpha=0.35, ms=5)
+
+
+def _mean_band(ax, values: list[float]) -> None:
+    v = np.asarray(values, dtype=float)
+    mean, std = v.mean(), v.std(ddof=1)
+    ax.axhline(mean, color="k", lw=1, label=f"mean {mean:.4g} +- {std:.2g} (std)")
+    ax.axhspan(mean - std, mean + std, color="k", alpha=0.1)
+
+
+def _no_round_off_trend(ax, values: list[float]) -> None:
+    """Values equal up to round-off are one value: show them on a flat axis around it, not on an
+    axis of width 1e-18 that draws the round-off as a trend."""
+    if not varies(values):
+        centre = float(np.mean(values))
+        half = 0.05 * abs(centre) or 1.0
+        ax.set_ylim(centre - half, centre + half)
+    ax.ticklabel_format(axis="y", useOffset=False)
