@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contact.model import PenetrationError
+from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
@@ -43,8 +43,8 @@ class Run:
 
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
-             fingerprint: str, x0=None, v0=None, resume: bool = False, progress=None, stop=None,
-             control=None) -> Run:  # fmt: skip
+             fingerprint: str, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
+             stop=None, control=None) -> Run:  # fmt: skip
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -59,7 +59,8 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
     else:
         try:
-            state = integrator.initial_state(x0=x0, v0=v0)
+            history = ContactHistory(**friction0) if friction0 is not None else None
+            state = integrator.initial_state(x0=x0, v0=v0, history=history)
         except PenetrationError as exc:
             raise InitialStateError(f"walls: a grain starts behind a wall ({exc})") from None
         stats, frame = RunStats(), 0

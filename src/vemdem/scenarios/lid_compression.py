@@ -70,7 +70,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     every = 0.5 * duration / cfg["lid"]["frames"]
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
-                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v, resume=resume_here,
+                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v,
+                      friction0=initial.friction, resume=resume_here,
                       progress=progress)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)

@@ -28,7 +28,7 @@ from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..geometry.packing import column_packing
 from ..io.results import write_json
-from ..io.state import StateFileError, load_state, save_state
+from ..io.state import StateFileError, friction_arrays, load_state, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
 
@@ -72,7 +72,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         "mass_scaling": scene.mass_scaling,
         **measures,
     }
-    save_state(out_dir / "state.npz", packing.grains, state.x, state.v, meta)
+    save_state(out_dir / "state.npz", packing.grains, state.x, state.v, meta, friction_arrays(state.history))
     plot_grains_3d(out_dir / "pack_3d.png", state.x, *scene.surface_triangles(),
                    title=f"the settled pack: {scene.n_grains} grains", floor_z=packing.floor)  # fmt: skip
     summary = run_summary("pack", scene, result, t_start)

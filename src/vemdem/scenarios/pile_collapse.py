@@ -24,7 +24,7 @@ from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
-from ..io.state import save_state
+from ..io.state import friction_arrays, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
 from .pack import initial_state_from
@@ -46,7 +46,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     result = simulate(scene, integrator, out_dir, duration=settle["max_time"], every=cfg["output"]["every"],
                       vtk=cfg["output"]["vtk"], fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v,
-                      resume=resume_here, progress=progress, stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
+                      friction0=initial.friction, resume=resume_here, progress=progress,
+                      stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
     centroids = scene.grain_centroids(state.x)
     repose, figures = measure_pile(centroids, state.x, scene.contact.topology.vertex_grain[: scene.n_vertices],
@@ -61,7 +62,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     plot_grains_3d(out_dir / "pile_3d.png", state.x, *scene.surface_triangles(), title=f"the heap: {title}",
                    floor_z=meta["floor"])  # fmt: skip
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
-               {**meta, "scenario": "pile_collapse", "time": state.t})  # fmt: skip
+               {**meta, "scenario": "pile_collapse", "time": state.t}, friction_arrays(state.history))  # fmt: skip
     summary = run_summary("pile_collapse", scene, result, t_start)
     summary.update(figures)
     summary["settled"] = result.stopped_early

@@ -53,7 +53,7 @@ class Integrator(Protocol):
     lumped: bool  # energies with the lumped mass (the explicit integrator's own)
     control: StepControl
 
-    def initial_state(self, x0=None, v0=None) -> State: ...
+    def initial_state(self, x0=None, v0=None, history=None) -> State: ...
 
     def advance(self, state: State, t_end: float, on_step, stats: RunStats) -> tuple[State, RunStats]: ...
 
@@ -71,8 +71,8 @@ class ImplicitNewmark:
                                         mass_damping=options.mass_damping,
                                         linear=make_linear_solver(options.linear))  # fmt: skip
 
-    def initial_state(self, x0=None, v0=None) -> State:
-        return initial_state(self.scene, x0=x0, v0=v0)
+    def initial_state(self, x0=None, v0=None, history=None) -> State:
+        return initial_state(self.scene, x0=x0, v0=v0, history=history)
 
     def advance(self, state, t_end, on_step, stats):
         return advance(self.scene, state, t_end, self.control, self.params, on_step, stats)
@@ -91,8 +91,8 @@ class ExplicitCentral:
         self.integrator = self.integrator_class(scene, ExplicitParameters(safety=options.safety,
                                                                           mass_damping=options.mass_damping))  # fmt: skip
 
-    def initial_state(self, x0=None, v0=None) -> State:
-        return explicit_initial_state(self.scene, self.integrator, x0=x0, v0=v0)
+    def initial_state(self, x0=None, v0=None, history=None) -> State:
+        return explicit_initial_state(self.scene, self.integrator, x0=x0, v0=v0, history=history)
 
     def advance(self, state, t_end, on_step, stats):
         return advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
@@ -105,8 +105,8 @@ class RigidCentral(ExplicitCentral):
     lumped = False
     integrator_class = RigidExplicit
 
-    def initial_state(self, x0=None, v0=None) -> State:
-        return self.integrator.initial_state(x0, v0)
+    def initial_state(self, x0=None, v0=None, history=None) -> State:
+        return self.integrator.initial_state(x0, v0, history=history)
 
 
 def _control(o: SolverOptions) -> StepControl:

@@ -200,10 +200,11 @@ class ExplicitIntegrator:
         return new, info
 
 
-def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None, v0=None, t0: float = 0.0) -> State:
+def explicit_initial_state(scene: Scene, integrator: ExplicitIntegrator, x0=None, v0=None, t0: float = 0.0,
+                           history=None) -> State:  # fmt: skip
     x = scene.bodies.reference.copy() if x0 is None else np.array(x0, float)
     v = np.zeros_like(x) if v0 is None else np.array(v0, float)
-    acc, _, cr = integrator.forces(x, v, t0, None)
+    acc, _, cr = integrator.forces(x, v, t0, history)
     return State(t0, x, v, acc, cr.trial_history, bodies={"dissipative": integrator.dissipative_residual(cr, v)})
 
 

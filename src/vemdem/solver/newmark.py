@@ -61,13 +61,14 @@ class NewmarkParameters:
     stall_share: float = 0.5  # share of a full update taken when Newton stalls or cycles (from the 4th iteration)
 
 
-def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0) -> State:
-    """Rest or prescribed velocities; the initial acceleration solves M a0 = f_g - f_int - r_c."""
+def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
+    """Rest or prescribed velocities; the initial acceleration solves M a0 = f_g - f_int - r_c
+    (friction from `history`, a handed-over ContactHistory, when given)."""
     x = scene.bodies.reference.copy() if x0 is None else np.array(x0, float)
     v = np.zeros_like(x) if v0 is None else np.array(v0, float)
     f_int = scene.bodies.evaluate(x).force
     cand = scene.contact.search(x, t0)
-    contact = scene.contact.evaluate(x, t0, cand, v=v)
+    contact = scene.contact.evaluate(x, t0, cand, history, v=v)
     rhs = (scene.gravity_force() - f_int - contact.force).ravel()
     a = solve(scene.mass_matrix(), rhs).reshape(-1, 3)
     return State(t0, x, v, a, contact.trial_history)

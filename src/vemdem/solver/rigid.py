@@ -138,7 +138,7 @@ class RigidExplicit(ExplicitIntegrator):
             raise StepRejected("non-finite force")
         return F, T, Fd, Td, cr
 
-    def initial_state(self, x0=None, v0=None, t0: float = 0.0) -> State:
+    def initial_state(self, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
         """Placement fitted to x0 (the reference by default), motion fitted to v0 (rest)."""
         b = self.bodies
         if x0 is None:
@@ -153,7 +153,7 @@ class RigidExplicit(ExplicitIntegrator):
             body_omega = np.einsum("gji,gj->gi", rotation, omega)
             momentum = np.einsum("gij,gj->gi", rotation, b.moments * body_omega)
         x, v = self.vertex_motion(centre, rotation, velocity, momentum)
-        F, T, Fd, Td, cr = self.loads(x, v, centre, velocity, momentum, t0, None)
+        F, T, Fd, Td, cr = self.loads(x, v, centre, velocity, momentum, t0, history)
         bodies = {"centre": centre, "rotation": rotation, "velocity": velocity, "momentum": momentum,
                   "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
         return State(t0, x, v, np.zeros_like(x), cr.trial_history, bodies=bodies)
