@@ -21,7 +21,7 @@ ALLOWED = {
     "config": {"model", "vem", "contact", "geometry", "io", "solver.api"},
     "scenarios": {"config", "driver", "solver.api", "solver.statics", "solver.state", "model", "geometry", "io",
                   "analysis", "contact.walls"},  # fmt: skip
-    "verification": {"solver", "model", "vem", "geometry", "scenarios.plates"},
+    "verification": {"solver", "model", "vem", "geometry", "scenarios.plates", "contact.defaults"},
     "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep"},
     "sweep": {"config", "scenarios.registry", "analysis.seeds"},
 }

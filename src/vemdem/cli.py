@@ -18,6 +18,7 @@ import argparse
 import os
 import shutil
 import sys
+import warnings
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
@@ -218,8 +219,14 @@ def cmd_sweep(args) -> int:
     return 1 if failed == len(cases) else 0
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings meant for the user, as the one line they are (no source location)."""
+    print(f"vemdem: warning: {message}", file=file or sys.stderr)
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    warnings.showwarning = _one_line_warning
     return {"run": cmd_run, "example": cmd_example, "sweep": cmd_sweep}[args.command](args)
 
 

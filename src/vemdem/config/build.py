@@ -3,6 +3,7 @@ in the scene (`Scene.mass_scaling`), from where every summary reports it."""
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -119,8 +120,32 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scen
                                              contact["mu_s"], contact["mu_d"], **overrides)  # fmt: skip
     except ValueError as exc:
         raise ConfigError(f"contact: {exc}") from None
-    return Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
-                       vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
+    scene = Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
+                        vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
+    if scaling > 1.0:
+        warn_if_mass_scaling_shows(scene)
+    return scene
+
+
+class MassScalingWarning(UserWarning):
+    """The mass scaling is large enough to change collisions (Scene.vibration_contact_ratio)."""
+
+
+# Largest grain vibration period, as a share of the contact duration, under which mass scaling
+# leaves a head-on impact within 7 % of its real restitution: 0.260 at scaling 1 and 1e3 (ratios
+# 0.002, 0.05), 0.267 at 1e4 (0.16), 0.279 at 2.4e4 (0.25), 0.35 at 1e5 (0.51), 0.68 at 1e6 (1.6);
+# verification/impact.py, docs/results.md.
+NEUTRAL_RATIO = 0.25
+
+
+def warn_if_mass_scaling_shows(scene: Scene) -> None:
+    ratio = scene.vibration_contact_ratio()
+    if ratio > NEUTRAL_RATIO:
+        neutral = scene.mass_scaling * (NEUTRAL_RATIO / ratio) ** 2
+        warnings.warn(MassScalingWarning(
+            f"solver.mass_scaling = {scene.mass_scaling:g} is not neutral: a grain's slowest vibration lasts "
+            f"{ratio:.2g} of a contact (above {NEUTRAL_RATIO:g}), so collisions rebound more than real grains do; "
+            f"scalings up to {neutral:.2g} are (docs/results.md, mass scaling)"), stacklevel=2)  # fmt: skip
 
 
 def check_placement(grains: list[Polyhedron], planes: list) -> None:

@@ -49,6 +49,8 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "integrator": run.integrator.name,
         "grain_model": scene.bodies.kind,
         "mass_scaling": scene.mass_scaling,  # density factor: inertia, weight and contact force scales
+        # a grain's slowest vibration over a contact's duration: above 0.25 the scaling changes collisions
+        "vibration_contact_ratio": scene.vibration_contact_ratio(),
         "n_grains": scene.n_grains,
         "n_vertices": scene.n_vertices,
         "n_steps": stats.accepted,

@@ -33,6 +33,8 @@ from ..vem.element import (
 from ..vem.mass import GrainMass, add_mass_to_blocks, build_mass
 from ..vem.material import Material
 
+RIGID_MODES = 6  # a free grain's zero eigenvalues: three translations, three rotations
+
 __all__ = ["BodyModel", "Evaluation", "InvertedElementError", "VemBodies", "equivalent_diameters"]
 
 
@@ -68,6 +70,8 @@ class BodyModel(Protocol):
 
     def critical_steps(self) -> np.ndarray: ...
 
+    def vibration_periods(self) -> np.ndarray: ...
+
 
 class VemBodies:
     """Flexible grains: one linear virtual element per grain (paper eq. 8), q = vertex positions."""
@@ -87,6 +91,7 @@ class VemBodies:
         self.dof_ptr = 3 * el.vertex_ptr
         self.body_mass = material.density * el.volume
         self._mass_matrix = None
+        self._spectrum = None  # per-grain eigenvalues at rest (critical_steps, vibration_periods)
 
     @property
     def n_bodies(self) -> int:
@@ -117,20 +122,32 @@ class VemBodies:
 
     def critical_steps(self) -> np.ndarray:
         """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the
-        tangent block of the grain, m its lumped vertex masses). Grains with the same number of
-        vertices are solved as one batch."""
-        el = self.elements
-        blocks = evaluate(el, el.reference, force=False, tangent=True).blocks
-        counts = np.diff(el.vertex_ptr)
-        out = np.empty(self.n_bodies)
-        for n in np.unique(counts):
-            grains = np.flatnonzero(counts == n)
-            K = np.stack([blocks[el.block_ptr[g] : el.block_ptr[g + 1]] for g in grains]).reshape(-1, 3 * n, 3 * n)
-            m = np.stack([np.repeat(self.lumped[el.vertex_ptr[g] : el.vertex_ptr[g + 1]], 3) for g in grains])
-            s = 1.0 / np.sqrt(m)
-            lam = np.linalg.eigvalsh(s[:, :, None] * K * s[:, None, :])[:, -1]
-            out[grains] = 2.0 / np.sqrt(lam)
-        return out
+        tangent block of the grain, m its lumped vertex masses)."""
+        return 2.0 / np.sqrt(self._spectra()[:, -1])
+
+    def vibration_periods(self) -> np.ndarray:
+        """2 pi/omega_1 of every grain: its slowest elastic mode (the seventh eigenvalue, after
+        the six rigid-body modes), with the lumped masses. Mass scaling s lengthens it by sqrt(s)."""
+        return 2.0 * np.pi / np.sqrt(self._spectra()[:, RIGID_MODES])
+
+    def _spectra(self) -> np.ndarray:
+        """The eigenvalues of m^-1/2 K m^-1/2 of every grain at rest, ascending, padded with the
+        largest where grains have fewer vertices; grains with the same number of vertices are
+        solved as one batch, once per run."""
+        if self._spectrum is None:
+            el = self.elements
+            blocks = evaluate(el, el.reference, force=False, tangent=True).blocks
+            counts = np.diff(el.vertex_ptr)
+            out = np.empty((self.n_bodies, 3 * counts.max()))
+            for n in np.unique(counts):
+                grains = np.flatnonzero(counts == n)
+                K = np.stack([blocks[el.block_ptr[g] : el.block_ptr[g + 1]] for g in grains]).reshape(-1, 3 * n, 3 * n)
+                m = np.stack([np.repeat(self.lumped[el.vertex_ptr[g] : el.vertex_ptr[g + 1]], 3) for g in grains])
+                s = 1.0 / np.sqrt(m)
+                lam = np.linalg.eigvalsh(s[:, :, None] * K * s[:, None, :])
+                out[grains] = np.pad(lam, ((0, 0), (0, out.shape[1] - 3 * n)), mode="edge")
+            self._spectrum = out
+        return self._spectrum
 
     def cauchy_stress(self, x: np.ndarray) -> np.ndarray:
         """(G, 3, 3) Cauchy stress of each grain's projected deformation (frames)."""

@@ -135,5 +135,8 @@ class RigidBodies:
     def critical_steps(self) -> np.ndarray:
         return np.full(self.n_bodies, np.inf)
 
+    def vibration_periods(self) -> np.ndarray:
+        return np.zeros(self.n_bodies)  # no elastic modes: infinitely stiff
+
     def cauchy_stress(self, x: np.ndarray) -> np.ndarray:
         return np.zeros((self.n_bodies, 3, 3))

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contact.friction import FrictionLaw
-from ..contact.law import InterfaceLaw
+from ..contact.law import InterfaceLaw, normal_force
 from ..contact.model import ContactModel
 from ..geometry.polyhedron import Polyhedron
 from ..vem.element import VemOptions
@@ -96,6 +96,21 @@ class Scene:
         w = self.bodies.lumped[:, None]
         ptr = self.bodies.vertex_ptr[:-1]
         return np.add.reduceat(w * x, ptr, axis=0) / np.add.reduceat(self.bodies.lumped, ptr)[:, None]
+
+    def contact_durations(self) -> np.ndarray:
+        """t_c = pi sqrt(m / (2 k)) of every grain: the duration of a contact between two such
+        grains, k the normal stiffness at the switch gap (where the law carries its reference
+        force, 10 m g). The contact law scales with the weight, so t_c is the same at every mass
+        scaling."""
+        law = self.contact.law
+        k = float(normal_force(law.switch_gap, law.packed())[1])
+        return np.pi * np.sqrt(self.bodies.body_mass / (2.0 * k))
+
+    def vibration_contact_ratio(self) -> float:
+        """max over grains of T_g / t_c: the grain's slowest vibration period against its contact
+        duration. T_g grows as sqrt(mass scaling): above about 0.25 a collision no longer sees a
+        stiff grain (verification/impact.py, docs/results.md)."""
+        return float(np.max(self.bodies.vibration_periods() / self.contact_durations()))
 
     def total_mass(self) -> float:
         return float(self.bodies.lumped.sum())
