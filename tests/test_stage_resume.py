@@ -1,0 +1,69 @@
+"""Every stage of a two-stage scenario resumes to the same bits (issue 15): pile_collapse and
+lid_compression settle their [pack] first, into DIR/pack; a run killed in either stage and
+continued with resume=True ends with the files of a run that was never interrupted."""
+
+import json
+
+import pytest
+
+from vemdem.driver import loop as loop_mod
+from vemdem.scenarios.registry import checked_config
+
+BOX = 3.2e-3
+PACK = {"n_grains": 4, "seed": 5, "grains": {"vertices": 8, "size": 1.2e-3}, "box": {"width": BOX, "depth": BOX}}
+CONFIGS = {
+    "pile_collapse": {"scenario": "pile_collapse", "pack": PACK, "settle": {"max_time": 0.02, "min_time": 0.02, "kinetic_threshold": 1e-2},
+                      "output": {"every": 5e-3, "vtk": False}},
+    "lid_compression": {"scenario": "lid_compression", "pack": PACK, "output": {"vtk": False},
+                        "settle": {"kinetic_threshold": 1e-2},
+                        "lid": {"start": 4.0e-3, "end": 3.2e-3, "speed": 0.08, "frames": 4}},
+}  # fmt: skip
+STAGE_FILES = ["history.csv", "grains.csv", "walls.csv"]
+
+
+def _run(raw, out, resume=False):
+    cfg, module = checked_config(raw)
+    return module.run(cfg, out, resume=resume)
+
+
+def _checkpoints(monkeypatch, stop_at=None):
+    """Count the checkpoints written (by folder); raise KeyboardInterrupt after the stop_at-th."""
+    original = loop_mod.save_checkpoint
+    written = []
+
+    def counting(path, *args, **kwargs):
+        original(path, *args, **kwargs)
+        written.append(path.parent.name)
+        if stop_at is not None and len(written) == stop_at:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop_mod, "save_checkpoint", counting)
+    return written
+
+
+def _same_results(a, b):
+    for stage in (a / "pack", a):
+        for name in STAGE_FILES:
+            mine = b / stage.relative_to(a) / name
+            assert mine.read_bytes() == (stage / name).read_bytes(), f"{stage.relative_to(a) / name} differs"
+    s1, s2 = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    for key in ("wall_seconds", "initial_state"):
+        s1.pop(key), s2.pop(key)
+    assert s1 == s2
+
+
+@pytest.mark.parametrize("scenario", sorted(CONFIGS))
+def test_a_run_killed_in_either_stage_resumes_to_the_same_bits(tmp_path, monkeypatch, scenario):
+    raw = CONFIGS[scenario]
+    written = _checkpoints(monkeypatch)
+    _run(raw, tmp_path / "whole")
+    in_pack = written.count("pack")
+    assert in_pack >= 3 and len(written) - in_pack >= 3, written  # both stages have frames to cut between
+    for name, stop_at in (("cut-in-pack", in_pack // 2 + 1), ("cut-in-main", in_pack + 2)):
+        _checkpoints(monkeypatch, stop_at)
+        with pytest.raises(KeyboardInterrupt):
+            _run(raw, tmp_path / name)
+        assert not (tmp_path / name / "summary.json").exists()
+        _checkpoints(monkeypatch)
+        _run(raw, tmp_path / name, resume=True)
+        _same_results(tmp_path / "whole", tmp_path / name)
