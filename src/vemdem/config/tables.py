@@ -269,6 +269,22 @@ PILE_COLLAPSE = {
 }
 PILE_COLLAPSE["settle"] = with_defaults(SETTLE, min_time=0.05)  # the pile must first start to move
 
+POURED_HEAP = {
+    "scenario": Field(("poured_heap",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "source": {
+        "lift_speed": Field(float, 0.02, positive, "speed at which the box around the pack rises (m/s): the grains "
+                            "flow out under it, slow against their settling speed"),
+    },
+    "disc": {
+        "radius": Field(float, 8e-3, positive, "radius of the floor disc (m); grains that roll off it are lost"),
+        "catch_depth": Field(float, 5e-3, positive, "depth of the catch floor below the disc (m)"),
+    },
+    **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
+}
+POURED_HEAP["settle"] = with_defaults(SETTLE, min_time=0.05)
+
 LID_COMPRESSION = {
     "scenario": Field(("lid_compression",), REQUIRED),
     "initial_state": INITIAL_STATE,

@@ -309,12 +309,13 @@ class ContactModel:
         return -np.array(out).reshape(-1, 3)
 
     def masses_of_pairs(self, ints):
-        """m_eq = m_A m_B / (m_A + m_B); a wall counts as infinitely heavy (m_eq = m_grain)."""
+        """m_eq = m_A m_B / (m_A + m_B); a wall counts as infinitely heavy (m_eq = m_grain). A
+        triangulated wall may be either side of a pair (its vertex on a grain's face: side A)."""
         G = self.n_grains
-        mA = self.grain_mass[ints[:, GRAIN_A]]
-        gB = ints[:, GRAIN_B]
+        gA, gB = ints[:, GRAIN_A], ints[:, GRAIN_B]
+        mA = self.grain_mass[np.minimum(gA, G - 1)]
         mB = self.grain_mass[np.minimum(gB, G - 1)]
-        return np.where(gB < G, mA * mB / (mA + mB), mA)
+        return np.where(gA >= G, mB, np.where(gB >= G, mA, mA * mB / (mA + mB)))
 
 
 def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,

@@ -93,3 +93,32 @@ def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0
         PlaneWall(np.array([cx, cy - hy, floor_z]), np.array([0.0, 1.0, 0.0]), gone, "wall -y"),
         PlaneWall(np.array([cx, cy + hy, floor_z]), np.array([0.0, -1.0, 0.0]), gone, "wall +y"),
     ]
+
+
+def disc_wall(radius: float, z: float = 0.0, centre=(0.0, 0.0), segments: int = 64, name: str = "disc") -> MeshWall:
+    """A horizontal disc of finite radius (a fan of `segments` triangles, facing up): the floor of a
+    poured heap, which grains roll off at its rim."""
+    angle = 2.0 * np.pi * np.arange(segments) / segments
+    ring = np.column_stack([centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle), np.full(segments, z)])
+    vertices = np.vstack([[centre[0], centre[1], z], ring])
+    k = np.arange(segments)
+    faces = np.column_stack([np.zeros(segments, int), 1 + k, 1 + (k + 1) % segments])  # counter-clockwise: +z
+    return MeshWall(vertices, faces, name=name)
+
+
+def box_sides(size_x: float, size_y: float, floor_z: float, height: float, center=(0.0, 0.0),
+              motion: Motion = Motion()) -> list[MeshWall]:  # fmt: skip
+    """The four vertical sides of a box as finite rectangles (two triangles each, facing inside),
+    from floor_z to floor_z + height: walls that can rise off the floor, grains flowing out under
+    their bottom edges (box_walls' planes are infinite and can only vanish)."""
+    cx, cy = center
+    hx, hy = 0.5 * size_x, 0.5 * size_y
+    z0, z1 = floor_z, floor_z + height
+    # (a, b): the bottom edge of each side; its two triangles are wound so that their normals point inside
+    sides = {"side -x": ((cx - hx, cy + hy), (cx - hx, cy - hy)), "side +x": ((cx + hx, cy - hy), (cx + hx, cy + hy)),
+             "side -y": ((cx - hx, cy - hy), (cx + hx, cy - hy)), "side +y": ((cx + hx, cy + hy), (cx - hx, cy + hy))}
+    walls = []
+    for name, (a, b) in sides.items():
+        v = np.array([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1], z1]])
+        walls.append(MeshWall(v, np.array([[0, 2, 1], [0, 3, 2]]), motion, name))
+    return walls

@@ -14,6 +14,7 @@ SCENARIOS = {
     "pack": "vemdem.scenarios.pack",
     "pile_collapse": "vemdem.scenarios.pile_collapse",
     "lid_compression": "vemdem.scenarios.lid_compression",
+    "poured_heap": "vemdem.scenarios.poured_heap",
 }
 
 EXAMPLES = {
@@ -25,6 +26,7 @@ EXAMPLES = {
     "paper-collapse-mid": "paper-collapse-mid.toml",
     "paper-collapse-low": "paper-collapse-low.toml",
     "paper-compression": "paper-compression.toml",
+    "poured-heap": "poured-heap.toml",
 }
 # the paper's own method at the real density (issue 14): the same runs, implicit, no mass scaling
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
