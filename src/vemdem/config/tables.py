@@ -234,7 +234,10 @@ PACK = {
     "grains": {
         "size": Field(float, 1.45e-3, positive, "mean equivalent diameter (m)"),
         "size_spread": Field(float, 0.1, _in(0, 1, hi_open=True), "sizes uniform in size (1 +- size_spread)"),
-        "vertices": Field(int, 30, _at_least(8), "vertices per grain"),
+        "shape": Field(("sand", "angular"), "sand",
+                       doc="sand: hull of points on an ellipsoid (rounded); angular: an ellipsoid cut by planes "
+                           "(flat faces, sharp edges; docs/results.md, grain shapes)"),
+        "vertices": Field(int, 30, _at_least(8), "vertices per grain (angular: about)"),
         "elongation": Field(float, 0.8, _in(0, 1, lo_open=True)),
         "flatness": Field(float, 0.8, _in(0, 1, lo_open=True)),
         "roughness": Field(float, 0.15, _in(0, 1, hi_open=True)),

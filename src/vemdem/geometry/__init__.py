@@ -17,6 +17,7 @@ from .polyhedron import (
     UnusedVertexError,
 )
 from .shapes import (
+    angular_grain,
     cube,
     extruded_polygon,
     hull_polyhedron,

@@ -14,7 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .polyhedron import Polyhedron
-from .shapes import sand_grain
+from .shapes import angular_grain, sand_grain
+
+# grain makers by name (the config's grains.shape): rounded sand, or cut, angular grains
+GRAIN_SHAPES = {"sand": sand_grain, "angular": angular_grain}
 
 SHAPE_KEYS = ("n_vertices", "elongation", "flatness", "roughness")
 
@@ -53,6 +56,7 @@ def column_packing(
     clearance: float = 0.1,
     seed: int = 0,
     shape_params: dict | None = None,
+    shape: str = "sand",
 ) -> Packing:
     """`n` sand grains in a column above the box, none touching another or a wall.
 
@@ -63,19 +67,20 @@ def column_packing(
     jitter, so the grains do not stand in exact columns. A layer's grains rest their
     lowest vertex on the layer's base; the first base is clearance * size above the
     floor and each next one a gap above the previous layer's highest vertex (slabs
-    rather than spheres, which keeps the column shorter). `shape_params` (keys
-    n_vertices, elongation, flatness, roughness) go to `sand_grain`. Everything random
+    rather than spheres, which keeps the column shorter). `shape` picks the grain maker
+    (GRAIN_SHAPES: "sand" rounded, "angular" cut), `shape_params` (keys n_vertices,
+    elongation, flatness, roughness) go to it. Everything random
     comes from one generator seeded with `seed`: same arguments, bitwise same packing.
     """
     footprint = _check_arguments(n, size, size_spread, box, clearance, shape_params)
+    if shape not in GRAIN_SHAPES:
+        raise ValueError(f"shape must be one of {sorted(GRAIN_SHAPES)}, got {shape!r}")
     rng = np.random.default_rng(seed)
     sizes = rng.uniform(size * (1.0 - size_spread), size * (1.0 + size_spread), n)
     grain_seeds = rng.integers(0, 2**62, n)
     rotations = random_rotations(rng, n)
-    shapes = [
-        sand_grain(size=s, seed=int(k), **(shape_params or {}))
-        for s, k in zip(sizes, grain_seeds)
-    ]
+    make = GRAIN_SHAPES[shape]
+    shapes = [make(size=s, seed=int(k), **(shape_params or {})) for s, k in zip(sizes, grain_seeds)]
     # vertices about the centroid, so the circumscribed sphere is centred on it
     local = [(g.vertices - g.centroid) @ r.T for g, r in zip(shapes, rotations)]
     radii = np.array([np.linalg.norm(v, axis=1).max() for v in local])

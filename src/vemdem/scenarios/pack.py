@@ -43,7 +43,7 @@ def place(cfg: dict):
     try:
         return column_packing(cfg["n_grains"], size=g["size"], size_spread=g["size_spread"],
                               box=(cfg["box"]["width"], cfg["box"]["depth"]), clearance=g["clearance"],
-                              seed=cfg["seed"], shape_params=shape)  # fmt: skip
+                              seed=cfg["seed"], shape_params=shape, shape=g["shape"])  # fmt: skip
     except ValueError as exc:
         raise ConfigError(f"grains: {exc}") from None
 
