@@ -11,7 +11,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def plot_force_strain(path: Path, strain, force, closed_form=None, mode: str = "", title: str = "") -> None:
+def plot_compression_curve(path: Path, strain, force, closed_form=None, mode: str = "", title: str = "") -> None:
+    """One grain squeezed between plates: the VEM force against strain, and the closed form
+    (docs/vem.md) when there is one. (The lid cycle has its own plot: force_strain.plot_force_strain.)"""
     fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
     ax.plot(np.asarray(strain) * 100, force, "o-", ms=3, label="VEM, one element")
     if closed_form is not None:

@@ -83,9 +83,9 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     else:
         closed = None
     if cfg["output"]["plot"]:
-        from ..analysis.plots import plot_force_strain
+        from ..analysis.plots import plot_compression_curve
 
-        plot_force_strain(out_dir / "force_strain.png", strains, np.array(forces), closed, mode, grain.name)
+        plot_compression_curve(out_dir / "force_strain.png", strains, np.array(forces), closed, mode, grain.name)
     summary["wall_seconds"] = time.perf_counter() - t_start
     write_json(out_dir / "summary.json", summary)
     return summary
