@@ -288,6 +288,23 @@ POURED_HEAP = {
 }
 POURED_HEAP["settle"] = with_defaults(SETTLE, min_time=0.05)
 
+TILTING_BOX = {
+    "scenario": Field(("tilting_box",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "tilt": {
+        "start": Field(float, 10.0, _in(0.0, 90.0, hi_open=True), "tilt of the box at t = 0 (degrees)"),
+        "rate": Field(float, 20.0, positive, "tilt rate (degrees/s): slow against an avalanche's growth"),
+        "max": Field(float, 60.0, _in(0.0, 90.0, lo_open=True, hi_open=True),
+                     "largest tilt (degrees): a box that has not avalanched by then ends the run"),
+        "avalanche_kinetic": Field(float, 1e-3, positive, "mean kinetic energy per grain, as a share of m g d, that "
+                                   "marks the avalanche: the tilt stops there"),
+    },
+    **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
+}
+# min_time counts from the avalanche; at rest ten times below the avalanche's kinetic energy
+TILTING_BOX["settle"] = with_defaults(SETTLE, min_time=0.05, kinetic_threshold=1e-4)
+
 LID_COMPRESSION = {
     "scenario": Field(("lid_compression",), REQUIRED),
     "initial_state": INITIAL_STATE,
@@ -323,6 +340,9 @@ def check_rules(cfg: dict) -> None:
             raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
         if solver["dt"] < solver["dt_min"]:
             raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    tilt = cfg.get("tilt")
+    if isinstance(tilt, dict) and "start" in tilt and "max" in tilt and tilt["start"] >= tilt["max"]:
+        raise ConfigError(f"tilt.start: must be below tilt.max ({tilt['max']:g} degrees), got {tilt['start']:g}")
     model = cfg.get("model")
     if isinstance(model, dict) and model.get("grains") == "rigid" and isinstance(solver, dict):
         if solver.get("integrator") != "explicit":

@@ -80,15 +80,18 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         while frame < n_frames and not stopped:
             t_next = min((frame + 1) * every, duration)
             t_wall = time.perf_counter()
-            steps_before = stats.accepted
+            steps_before, t_before = stats.accepted, state.t
             state, stats = integrator.advance(state, t_next, on_step, stats)
             frame += 1
             last_contact = last["info"].contact
             writer.write(state, last["info"].strain_energy, last_contact)
             save_checkpoint(ckpt, state, steps, stats, frame, fingerprint)
             if progress:
-                rate = (stats.accepted - steps_before) / max(time.perf_counter() - t_wall, 1e-9)
-                progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, dt = {steps.dt:.2e} s")
+                taken = stats.accepted - steps_before
+                rate = taken / max(time.perf_counter() - t_wall, 1e-9)
+                # the frame's mean step: its last one is cut to land on the frame's time
+                mean_dt = (state.t - t_before) / max(taken, 1)
+                progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, mean dt = {mean_dt:.2e} s")
             stopped = stop is not None and stop(state)
     finally:
         writer.close()

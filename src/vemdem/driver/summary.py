@@ -10,18 +10,21 @@ from ..model.scene import Scene
 from .loop import Run
 
 
-def energy_balance(history_csv) -> dict | None:
+def energy_balance(history_csv, since: float | None = None) -> dict | None:
     """From the first and last frames of history.csv: the mechanical energy E = kinetic + strain +
     gravity + contact at both, what damping and friction dissipated between them, the potential
     energy gravity released, and the balance error (E_end + dissipated - E_start) relative to the
     larger of the released potential and the initial kinetic energy (issue 17: within 1 % when
     the integrator keeps the books; walls removed or moved take or give energy that is not
-    counted). None when there are fewer than two frames."""
+    counted). `since`: from the first frame at or after that time (a scenario that works on the
+    grains until then, as the tilting box turning gravity). None when there are fewer than two frames."""
     try:
         with open(history_csv) as fh:
             rows = list(csv.DictReader(fh))
     except OSError:
         return None
+    if since is not None:
+        rows = [r for r in rows if float(r["time"]) >= since]
     if len(rows) < 2:
         return None
     first, last = ({k: float(v) for k, v in r.items()} for r in (rows[0], rows[-1]))

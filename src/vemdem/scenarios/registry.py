@@ -15,6 +15,7 @@ SCENARIOS = {
     "pile_collapse": "vemdem.scenarios.pile_collapse",
     "lid_compression": "vemdem.scenarios.lid_compression",
     "poured_heap": "vemdem.scenarios.poured_heap",
+    "tilting_box": "vemdem.scenarios.tilting_box",
 }
 
 EXAMPLES = {
@@ -27,6 +28,7 @@ EXAMPLES = {
     "paper-collapse-low": "paper-collapse-low.toml",
     "paper-compression": "paper-compression.toml",
     "poured-heap": "poured-heap.toml",
+    "tilting-box": "tilting-box.toml",
 }
 # the paper's own method at the real density (issue 14): the same runs, implicit, no mass scaling
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})

@@ -55,11 +55,16 @@ class ExplicitIntegrator:
         self.params = params
         self.grain_dt = float(scene.bodies.critical_steps().min())
         self.inv_mass = 1.0 / scene.bodies.lumped[:, None]
-        self.f_grav = scene.bodies.lumped[:, None] * scene.gravity[None, :]  # lumped: free fall is exact
+        self._lumped = scene.bodies.lumped[:, None]  # gravity on the lumped masses: free fall is exact
         n_wall_nodes = len(scene.contact.wall_nodes(0.0))
         self.inv_mass_all = np.concatenate([1.0 / scene.bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
         self.skin = params.skin_gaps * scene.contact.law.activation_gap
         self._candidates = None
+
+    @property
+    def f_grav(self) -> np.ndarray:
+        # read at every step: a scenario may turn gravity between steps (the tilting box)
+        return self._lumped * self.scene.gravity[None, :]
 
     # ---------------------------------------------------------------- Verlet list of candidates
     def _wall_offsets(self, t):

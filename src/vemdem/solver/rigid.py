@@ -111,7 +111,6 @@ class RigidExplicit(ExplicitIntegrator):
         super().__init__(scene, params)
         b = scene.bodies
         self.bodies = b
-        self.gravity_force = b.mass[:, None] * scene.gravity[None, :]  # at the centroid: no torque
 
     # ------------------------------------------------------------------ placement <-> vertices
     def vertex_motion(self, centre, rotation, velocity, momentum):
@@ -132,7 +131,7 @@ class RigidExplicit(ExplicitIntegrator):
         alpha = self.params.mass_damping
         Fd -= alpha * b.mass[:, None] * velocity
         Td -= alpha * momentum
-        F += self.gravity_force - alpha * b.mass[:, None] * velocity
+        F += b.mass[:, None] * self.scene.gravity[None, :] - alpha * b.mass[:, None] * velocity
         T -= alpha * momentum
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(T))):
             raise StepRejected("non-finite force")
