@@ -61,6 +61,7 @@ def test_a_broken_friction_history_is_refused(tmp_path):
         load_state(tmp_path / "bad.npz")
 
 
+@pytest.mark.filterwarnings("ignore::vemdem.config.build.MassScalingWarning")  # 1e6 on purpose: the scaling changes
 def test_a_pack_from_another_mass_scaling_is_settled_again(tmp_path):
     """A pack settled at scaling 1e4 carries the strain of that weight; a collapse at 1e6 first
     settles it again in its box at 1e6 (DIR/reequilibrate): the grains' strain energy grows with
