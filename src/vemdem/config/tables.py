@@ -343,6 +343,10 @@ def check_rules(cfg: dict) -> None:
     tilt = cfg.get("tilt")
     if isinstance(tilt, dict) and "start" in tilt and "max" in tilt and tilt["start"] >= tilt["max"]:
         raise ConfigError(f"tilt.start: must be below tilt.max ({tilt['max']:g} degrees), got {tilt['start']:g}")
+    gravity = cfg.get("gravity")
+    if isinstance(tilt, dict) and isinstance(gravity, list) and (gravity[0] != 0 or gravity[1] != 0 or gravity[2] >= 0):
+        raise ConfigError(f"gravity: the tilting box turns gravity from straight down; give [0, 0, -g], got "
+                          f"{[float(v) for v in gravity]}")  # fmt: skip
     model = cfg.get("model")
     if isinstance(model, dict) and model.get("grains") == "rigid" and isinstance(solver, dict):
         if solver.get("integrator") != "explicit":

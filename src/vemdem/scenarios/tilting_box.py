@@ -35,7 +35,7 @@ import numpy as np
 
 from ..analysis.plots import plot_grains_3d
 from ..analysis.tilt import fit_surface, plot_tilt, tilted_gravity
-from ..config import ConfigError, tables
+from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls
 from ..driver.checkpoint import config_fingerprint
@@ -120,9 +120,6 @@ class Tilt:
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    g = np.asarray(cfg["gravity"], float)
-    if g[0] != 0 or g[1] != 0 or g[2] >= 0:
-        raise ConfigError(f"gravity: the tilting box turns gravity from straight down; give [0, 0, -g], got {list(g)}")
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = dict(initial.meta)
     walls = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
