@@ -92,6 +92,38 @@ def bench_evaluation(n: int, repeat: int):
     print(f"        broad phase {t_search * 1e3:8.2f} ms   narrow+forces {t_force * 1e3:8.2f} ms   "
           f"narrow+forces+tangent {t_full * 1e3:8.2f} ms   full evaluation {(t_search + t_full) * 1e3:8.2f} ms")  # fmt: skip
     print(f"        {res.n_contacts / (t_search + t_full):,.0f} contact pairs/s with tangent")
+    bench_friction_tangent(model, x, cand, first.trial_history, repeat)
+
+
+def bench_friction_tangent(model, x, cand, history, repeat: int):
+    """The friction/damping residual with its analytic tangent (what Newton calls) against the
+    residual plus the complex-step tangent it replaced, on the same pairs."""
+    from vemdem.contact.friction import complex_step_tangent, dissipative_forces, dissipative_terms
+    from vemdem.contact.model import pair_keys
+
+    x_all, ints, _ = model.pairs(x, 0.0, cand)
+    found, c_prev, gt_prev, stick_prev = history.lookup(pair_keys(ints))
+    v_all = 1e-3 * np.random.default_rng(0).normal(size=x_all.shape)  # some pairs slip
+    m = len(ints)
+    common = (x_all, v_all, 1e4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.friction_params,
+              model.masses_of_pairs(ints))  # fmt: skip
+    force, tangent = np.zeros((m, 6, 3)), np.zeros((m, 18, 18))
+    stick, gt = np.zeros(m, dtype=np.bool_), np.zeros((m, 3))
+    reference = np.zeros((m, 18, 18))
+
+    def analytic():
+        dissipative_terms(*common, force, tangent, stick, gt)
+
+    def complex_step():
+        dissipative_forces(*common, force, stick, gt)
+        complex_step_tangent(*common, reference)
+
+    analytic(), complex_step()  # compile
+    t_a, _ = time_it(analytic, repeat)
+    t_c, _ = time_it(complex_step, repeat)
+    err = np.abs(tangent - reference).max() / np.abs(reference).max()
+    print(f"        friction+damping with tangent: analytic {t_a * 1e3:7.2f} ms, complex step {t_c * 1e3:7.2f} ms "
+          f"({t_c / t_a:.1f}x), {m / t_a:,.0f} pairs/s, max difference {err:.1e} of the largest entry")  # fmt: skip
 
 
 def bench_scaling(sizes, repeat: int):
@@ -103,6 +135,8 @@ def bench_scaling(sizes, repeat: int):
         t, pairs = time_it(lambda: candidate_pairs(x, ptr, 1.45e-5), repeat)
         rows.append((n, t))
         print(f"  {n:7d} grains  {len(pairs):8d} pairs  {t * 1e3:8.2f} ms  {n / t:,.0f} grains/s")
+    if len(rows) < 2:
+        return
     n, t = np.array(rows).T
     slope = np.polyfit(np.log(n), np.log(t), 1)[0]
     print(f"  scaling exponent t ~ N^{slope:.2f} (1 = linear)")

@@ -175,3 +175,71 @@ def test_wall_from_an_stl_file(tmp_path):
     model = ContactModel(c.vertices, [c.faces], np.array([0, 8]), np.array([1.0]), LAW, FRICTION, meshes=[lid])
     res = model.evaluate(c.vertices, 0.0, model.search(c.vertices, 0.0))
     assert res.n_contacts == 4 and res.wall_reactions[0][2] > 0
+
+
+def _pair_nodes(kind, d, rng):
+    """Node positions of one pair of the given kind at gap d, the closest points inside the
+    features, turned and moved at random (kinds and node order as in contact.narrow)."""
+    from vemdem.contact.narrow import EDGE_EDGE, VERTEX_EDGE, VERTEX_FACE
+
+    L = 1e-4
+    j = rng.uniform(-0.2, 0.2, size=3) * L
+    if kind == VERTEX_FACE:
+        xs = [[0.1 * L, 0.05 * L, d], [-L, -L, 0], [L, -0.8 * L, 0], [0.1 * L, L, 0]]
+    elif kind == EDGE_EDGE:
+        xs = [[-L, j[0], d], [L, j[1], d], [j[2], -L, 0], [0.3 * j[0], L, 0]]
+    elif kind == VERTEX_EDGE:
+        xs = [[j[0], 0, d], [-L, 0, 0], [L, 0, 0]]
+    else:
+        xs = [[0, 0, d], [0, 0, 0]]
+    xs = np.array(xs) @ rotation_matrix(rng.normal(size=3)).T + rng.normal(size=3) * 1e-3
+    out = np.zeros((6, 3))
+    out[: len(xs)] = xs
+    return out
+
+
+def test_analytic_friction_tangent_is_the_complex_step_derivative(rng):
+    """The analytic tangent (forward mode, dc/dx by implicit differentiation of the LCP) against
+    the complex-step derivative of the same residual, exact to round-off: every pair kind, the
+    penalty and the barrier band, stick and slip, with and without the damping clamp, new and
+    continuing pairs."""
+    from vemdem.contact.friction import _lcp_coords, complex_step_tangent, dissipative_terms
+    from vemdem.contact.pairs import INT_COLS, KIND, NODE0
+
+    friction = FrictionLaw(mu_s=0.5, mu_d=0.4, tangential_penalty=EPS_T, tangential_viscosity=3.0,
+                           damping_ratio=0.4)  # fmt: skip
+    law, fr = LAW.packed(), friction.packed()
+    n_pairs = 400
+    x = np.zeros((6 * n_pairs, 3))
+    ints = np.full((n_pairs, INT_COLS), -1, dtype=np.int64)
+    for c in range(n_pairs):
+        kind = c % 4
+        d = rng.uniform(0.1, 0.95) * LAW.activation_gap  # both bands (switch at 0.3)
+        x[6 * c : 6 * c + 6] = _pair_nodes(kind, d, rng)
+        ints[c, KIND] = kind
+        ints[c, NODE0 : NODE0 + 6] = np.arange(6 * c, 6 * c + 6)
+    # a third of the pairs slowly moving and hardly shifted since the last step (they stick), the
+    # rest fast (the damping clamp) or far from their previous contact point (slip)
+    slow = rng.random(n_pairs) < 0.35
+    v = rng.normal(size=(n_pairs, 6, 3)) * np.where(slow, 1e-5, rng.choice([1e-3, 1e-1], size=n_pairs))[:, None, None]
+    v = v.reshape(-1, 3)
+    c_now = np.array([_lcp_coords(ints[c, KIND], x[6 * c : 6 * c + 6]) for c in range(n_pairs)], dtype=float)
+    c_prev = np.where(slow[:, None], c_now + 1e-6 * rng.normal(size=(n_pairs, 2)), rng.uniform(0.1, 0.4, (n_pairs, 2)))
+    gt_prev = rng.normal(size=(n_pairs, 3)) * np.where(slow, 1e-10, 1e-5)[:, None]
+    was_active = rng.random(n_pairs) < 0.8
+    was_stick = rng.random(n_pairs) < 0.5
+    m_eq = rng.uniform(1e-6, 3e-6, size=n_pairs)
+    a4 = 2e4
+    local_force = np.zeros((n_pairs, 6, 3))
+    analytic = np.zeros((n_pairs, 18, 18))
+    stick, gt = np.zeros(n_pairs, dtype=np.bool_), np.zeros((n_pairs, 3))
+    dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, analytic,
+                      stick, gt)  # fmt: skip
+    reference = np.zeros((n_pairs, 18, 18))
+    complex_step_tangent(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, reference)
+    assert 0.2 < stick.mean() < 0.8  # both branches
+    assert (np.abs(local_force).max(axis=(1, 2)) > 0).all()  # every pair has a force to differentiate
+    for c in range(n_pairs):
+        scale = np.abs(reference[c]).max()
+        assert scale > 0
+        np.testing.assert_allclose(analytic[c], reference[c], rtol=0, atol=1e-9 * scale, err_msg=f"pair {c}")

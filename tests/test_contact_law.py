@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from vemdem.contact.law import InterfaceLaw, normal_force, normal_potential
+from vemdem.contact.law import InterfaceLaw, normal_force, normal_potential, normal_stiffness_slope
 
 # The GIRAFFE manual's syntax example: EPN1 1e8, N1 2, N2 -2, GNB 2e-4, Factor 0.3
 MANUAL = InterfaceLaw(activation_gap=2e-4, penalty=1e8, penalty_exponent=2, switch_factor=0.3, barrier_exponent=-2)
@@ -54,6 +54,15 @@ def test_stiffness_is_minus_the_derivative_of_the_force(law):
         assert normal_force(g, p)[1] == pytest.approx(fd, rel=1e-6)
         dphi = (normal_potential(g + h, p) - normal_potential(g - h, p)) / (2 * h)
         assert -dphi == pytest.approx(normal_force(g, p)[0], rel=1e-6)
+
+
+@pytest.mark.parametrize("law", [MANUAL, InterfaceLaw(2e-5, 3e9, 2.5, 0.2, -3.0), InterfaceLaw(2e-5, 3e9, 1.0)])
+def test_stiffness_slope_is_the_derivative_of_the_stiffness(law):
+    p = law.packed()
+    for g in np.append(np.linspace(0.05, 0.98, 31), 1.2) * law.activation_gap:
+        h = 1e-7 * g
+        fd = (normal_force(g + h, p)[1] - normal_force(g - h, p)[1]) / (2 * h)
+        assert normal_stiffness_slope(g, p) == pytest.approx(fd, rel=1e-6, abs=1e-3 * abs(normal_force(g, p)[1]) / g)
 
 
 @pytest.mark.parametrize(

@@ -17,9 +17,18 @@ Our choice: the stored slip is carried to the new tangent plane by the projectio
 rather than GIRAFFE's rotation Q; the two differ at second order in the normal's rotation per
 step, and the projection keeps the tangent simple.
 
-The tangent of these dissipative terms is the complex-step derivative of this same function
-(exact to round-off, not a finite difference): every quantity, the contact point c included, is
-recomputed from the perturbed positions, so the linearisation is consistent by construction.
+The tangent of these dissipative terms is analytic (`dissipative_tangent`): forward-mode
+derivatives of every quantity above in the 3 nn node coordinates, the contact point c included.
+c is the stationary point of q(c) = |g(c)|^2, so implicit differentiation of J^T g = 0
+(J = dg/dc = sum_i D_i x_i) gives
+
+    (J^T J) dc = -(D_p g_b + w_p J_b)           for a unit change of node p's coordinate b,
+    dg = J dc + w_p e_b,   dd = n . dg,   dn = (dg - n dd) / d,   dw_i = D_i . dc,
+
+and the rest is the chain rule through the branches taken (stick/slip and the damping clamp are
+decided on the unperturbed state, as a Newton step must). It replaced the complex-step derivative
+of this same function (12 complex evaluations per pair: 2.8x the time; `complex_step_tangent`,
+kept as the tests' reference, agrees to 1e-12 relative; docs/results.md "Where the time goes").
 """
 
 from __future__ import annotations
@@ -29,9 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from .law import normal_force
+from .law import normal_force, normal_stiffness_slope
 from .narrow import (
     EDGE_EDGE,
+    N_COORDS,
     N_NODES,
     VERTEX_EDGE,
     VERTEX_FACE,
@@ -180,8 +190,8 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
 
 
 # Two kernels rather than one with a tangent flag: numba compiles every branch of a kernel, and
-# the complex-step branch compiles a complex copy of the friction code, which explicit runs never
-# call (a fresh install's first explicit run compiles only dissipative_forces).
+# explicit runs never need the tangent (a fresh install's first explicit run compiles only
+# dissipative_forces).
 @njit(parallel=True, cache=True)
 def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                        stick_out, gt_out):  # fmt: skip
@@ -194,15 +204,156 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
 @njit(parallel=True, cache=True)
 def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                       local_tangent, stick_out, gt_out):  # fmt: skip
-    """Damping + friction residual of every pair and its complex-step Jacobian (18 x 18)."""
+    """Damping + friction residual of every pair and its analytic Jacobian (18 x 18)."""
     for c in prange(len(ints)):
         xs, vs = _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                              stick_out, gt_out)  # fmt: skip
+        dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr,
+                            m_eq[c], local_tangent[c])  # fmt: skip
+
+
+@njit(cache=True)
+def _sub(u, a, v):
+    """u - a v for 3-vectors (numba allocates less with these than with array expressions)."""
+    return np.array([u[0] - a * v[0], u[1] - a * v[1], u[2] - a * v[2]])
+
+
+@njit(cache=True)
+def _dot3(u, v):  # narrow._dot, inlined here by name for the reader of this kernel
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+@njit(cache=True)
+def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out):
+    """d(residual)/d(x) of `dissipative_force` at xs (velocities vs there, v = vs + a4 dx): out
+    (18, 18), row 3 i + a the residual of node i's component a, column 3 p + b node p's coordinate b.
+    Forward mode, one column per node coordinate (module docstring for dc)."""
+    nn = N_NODES[kind]
+    m = N_COORDS[kind]
+    n3 = 3 * nn
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    c0, c1 = _lcp_coords(kind, xs)
+    w = pair_weights(kind, c0, c1, w0, D)
+    # the unperturbed state, as dissipative_force computes it
+    g = np.zeros(3)
+    vrel = np.zeros(3)
+    J = np.zeros((3, 2))
+    for i in range(nn):
+        for a in range(3):
+            g[a] += w[i] * xs[i, a]
+            vrel[a] += w[i] * vs[i, a]
+            J[a, 0] += D[i, 0] * xs[i, a]
+            J[a, 1] += D[i, 1] * xs[i, a]
+    d = np.sqrt(_dot3(g, g))
+    n = g / d
+    fn, k = normal_force(d, law)
+    dk_dd = normal_stiffness_slope(d, law)
+    gn_dot = _dot3(n, vrel)
+    c_n = 2.0 * fr[ZETA] * np.sqrt(k * m_eq)
+    f_damp = -c_n * gn_dot
+    clamped = fn + f_damp < 0.0
+    if clamped:
+        f_damp = -fn
+    f_normal = fn + f_damp
+    wp = np.zeros(6)
+    a_vec = np.zeros(3)
+    gt = np.zeros(3)
+    if was_active:
+        wp = pair_weights(kind, c_prev[0], c_prev[1], np.empty(6), np.empty((6, 2)))
+        for i in range(nn):
+            for a in range(3):
+                a_vec[a] += wp[i] * xs[i, a]
+        for a in range(3):
+            a_vec[a] += gt_prev[a]
+        gt = _sub(a_vec, _dot3(n, a_vec), n)
+    vt = _sub(vrel, gn_dot, n)
+    f_try = fr[EPS_T] * gt + fr[C_T] * vt
+    mu = fr[MU_S] if was_stick else fr[MU_D]
+    f_try_norm = np.sqrt(_dot3(f_try, f_try))
+    stick = f_try_norm <= mu * f_normal
+    u = f_try / f_try_norm if f_try_norm > 0.0 else np.zeros(3)
+    force_on_a = f_damp * n
+    if stick:
+        force_on_a -= f_try
+    else:
+        force_on_a -= fr[MU_D] * f_normal * u
+    # (J^T J)^-1 for dc (m = 0: the vertex-vertex pair has no coordinates)
+    H00 = _dot3(J[:, 0], J[:, 0])
+    H01 = _dot3(J[:, 0], J[:, 1])
+    H11 = _dot3(J[:, 1], J[:, 1])
+    det = H00 * H11 - H01 * H01
+    out[:, :] = 0.0
+    dc = np.zeros(2)
+    dg = np.zeros(3)
+    dv = np.zeros(3)
+    da = np.zeros(3)
+    for col in range(n3):
+        p = col // 3
+        b = col % 3
+        r0 = D[p, 0] * g[b] + w[p] * J[b, 0]
+        r1 = D[p, 1] * g[b] + w[p] * J[b, 1]
+        if m == 2:
+            dc[0] = -(H11 * r0 - H01 * r1) / det
+            dc[1] = -(H00 * r1 - H01 * r0) / det
+        elif m == 1:
+            dc[0] = -r0 / H00
+            dc[1] = 0.0
+        else:
+            dc[0] = 0.0
+            dc[1] = 0.0
+        for a in range(3):
+            dg[a] = J[a, 0] * dc[0] + J[a, 1] * dc[1]
+            dv[a] = 0.0
+        dg[b] += w[p]
+        dv[b] += a4 * w[p]
+        for i in range(nn):
+            dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
+            for a in range(3):
+                dv[a] += dwi * vs[i, a]
+        dd = _dot3(n, dg)
+        dn = _sub(dg, dd, n) / d
+        dfn = -k * dd
+        dgn = _dot3(dn, vrel) + _dot3(n, dv)
+        if clamped:
+            df_damp = -dfn
+        else:
+            dc_n = c_n * dk_dd * dd / (2.0 * k) if k > 0.0 else 0.0
+            df_damp = -(dc_n * gn_dot + c_n * dgn)
+        df_normal = dfn + df_damp
+        dgt = np.zeros(3)
+        if was_active:
+            for a in range(3):
+                da[a] = 0.0
+            da[b] = wp[p]
+            dgt = _sub(_sub(da, _dot3(dn, a_vec) + _dot3(n, da), n), _dot3(n, a_vec), dn)
+        dvt = _sub(_sub(dv, dgn, n), gn_dot, dn)
+        df_try = fr[EPS_T] * dgt + fr[C_T] * dvt
+        if stick:
+            dft = df_try
+        else:
+            dft = fr[MU_D] * (df_normal * u + f_normal * _sub(df_try, _dot3(u, df_try), u) / f_try_norm)
+        dF = df_damp * n + f_damp * dn - dft
+        for i in range(nn):
+            dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
+            for a in range(3):
+                out[3 * i + a, col] = -(dwi * force_on_a[a] + w[i] * dF[a])
+
+
+@njit(parallel=True, cache=True)
+def complex_step_tangent(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_tangent):
+    """The same Jacobian as the complex-step derivative of `dissipative_force` (exact to round-off,
+    12 complex evaluations per pair): the tests' independent reference and the benchmark's baseline."""
+    for c in prange(len(ints)):
         kind = ints[c, KIND]
         nn = N_NODES[kind]
+        xs = np.zeros((6, 3))
+        vs = np.zeros((6, 3))
         scale = 0.0
         for i in range(nn):
             for a in range(3):
+                xs[i, a] = x[ints[c, NODE0 + i], a]
+                vs[i, a] = v[ints[c, NODE0 + i], a]
                 scale = max(scale, abs(xs[i, a]))
         h = COMPLEX_STEP * max(scale, 1e-300)
         xc = np.zeros((6, 3), dtype=np.complex128)

@@ -74,6 +74,20 @@ def normal_force(g, p):
 
 
 @njit(cache=True)
+def normal_stiffness_slope(g, p):
+    """dk/dg, the law's second derivative (the analytic friction tangent needs it through the
+    damping coefficient 2 zeta sqrt(k m))."""
+    if g >= p[GBAR]:
+        return 0.0
+    if g > p[GBB]:
+        n1 = p[N1]
+        return 0.0 if n1 == 1.0 else -p[EPS1] * n1 * (n1 - 1.0) * (p[GBAR] - g) ** (n1 - 2.0)
+    if g <= 0.0:
+        return -np.inf
+    return -p[EPS2] * p[N2] * (p[N2] - 1.0) * g ** (p[N2] - 2.0)
+
+
+@njit(cache=True)
 def normal_potential(g, p):
     """Phi(g) = int_g^gbar f_n(s) ds, closed form."""
     if g >= p[GBAR]:
