@@ -51,6 +51,19 @@ def solve(K, b: np.ndarray) -> np.ndarray:
     return x
 
 
+def superlu(K):
+    """SuperLU with the options for our matrices: structurally symmetric (a pair's tangent couples
+    both grains both ways), values not (friction), diagonals strong (the mass term, each grain's
+    own stiffness). A minimum-degree ordering of A^T + A with diagonal pivots preferred
+    (SymmetricMode, threshold 0.01: an off-diagonal pivot only where the diagonal is 100 times
+    smaller) against SciPy's default COLAMD with full partial pivoting, measured on the settled
+    515-grain real-density pack (docs/linear-solvers.md): the whole Newton matrix (46,350 dofs)
+    0.53 s against 23.5 s, fill 7.3 M against 84 M; the grain-block coarse matrix (3,090) 16 ms
+    against 38 ms; solutions the same to round-off."""
+    return spla.splu(sp.csc_matrix(K), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
+                     options={"SymmetricMode": True})  # fmt: skip
+
+
 def sparse_backend() -> str:
     if pypardiso is not None and os.environ.get("VEMDEM_LINEAR_SOLVER", "scipy") == "pardiso":
         return "pardiso"
@@ -65,9 +78,7 @@ def _sparse_solve(K, b: np.ndarray) -> np.ndarray:
         if np.linalg.norm(K @ x - b) > 1e-6 * max(np.linalg.norm(b), 1e-300):
             raise RuntimeError("PARDISO's solution does not satisfy the system")
         return x
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", spla.MatrixRankWarning)  # SuperLU warns and returns NaN
-        return spla.spsolve(sp.csc_matrix(K), b)
+    return superlu(K).solve(np.asarray(b, float))
 
 
 class DirectSolver:
@@ -89,7 +100,7 @@ class DirectSolver:
                 if K.shape[0] <= DENSE_LIMIT:
                     self._lu = ("dense", la.lu_factor(K.toarray(), check_finite=True))
                 else:
-                    self._lu = ("splu", spla.splu(K.tocsc()))
+                    self._lu = ("splu", superlu(K))
         except (*_SINGULAR, la.LinAlgWarning) as exc:
             raise _singular(exc) from None
 

@@ -26,10 +26,10 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numba import njit, prange
 
 from .base import LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
+from .direct import superlu
 
 
 @njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
@@ -239,7 +239,7 @@ class _CoarseSpace:
                 indptr = np.searchsorted(rows, np.arange(G + 1))
                 A = sp.bsr_matrix((blocks, cols, indptr), shape=(6 * G, 6 * G))
                 self._dense = None
-                self._lu = spla.splu(A.tocsc())
+                self._lu = superlu(A)
         except (RuntimeError, np.linalg.LinAlgError) as exc:  # a free rigid mode
             raise SingularSystemError(f"singular tangent (coarse space: {exc}); is every rigid-body mode constrained?"
                                       ) from None  # fmt: skip
