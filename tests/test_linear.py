@@ -42,3 +42,24 @@ def test_singular_system_is_named(monkeypatch, backend):
     K[:, 5] = 0.0
     with pytest.raises(linear.SingularSystemError, match="singular tangent"):
         linear.solve(K.tocsr(), b)
+
+
+def test_superlu_pivots_off_the_diagonal_where_it_must():
+    """superlu prefers diagonal pivots (SymmetricMode, threshold 0.01) for speed; a block whose
+    diagonal is tiny against its column (a permuted, non-symmetric block) must still be solved
+    exactly, on an unsymmetric pattern and unsymmetric values."""
+    rng = np.random.default_rng(4)
+    n = 900
+    K, _ = grain_like_system(n, seed=4)
+    K = K.tolil()
+    P = np.roll(np.arange(30), 1)  # a cyclic shift: every diagonal entry off the permutation
+    B = 10.0 * np.eye(30)[P] + 0.1 * rng.standard_normal((30, 30))
+    B[np.arange(30), np.arange(30)] = 1e-9  # a diagonal pivot here would blow up the factors
+    K[300:330, 300:330] = B
+    K[10, 700] = 3.0  # one-way coupling: an unsymmetric pattern
+    K = K.tocsr()
+    b = rng.standard_normal(n)
+    x = linear.direct.superlu(K).solve(b)
+    reference = np.linalg.solve(K.toarray(), b)
+    np.testing.assert_allclose(x, reference, rtol=0, atol=1e-10 * np.abs(reference).max())
+    assert np.linalg.norm(K @ x - b) < 1e-10 * np.linalg.norm(b)
