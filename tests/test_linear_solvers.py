@@ -173,3 +173,22 @@ def test_coarse_correction_is_the_galerkin_projection(monkeypatch, dense_up_to):
     # Z^T K Z cancels the stiffness of E = 90 GPa grains (rigid modes) down to the mass term, 1e-8 of
     # it: round-off of 1e-9 relative in any order of summation
     np.testing.assert_allclose(coarse.correction(r), reference, rtol=1e-7, atol=1e-10 * np.abs(reference).max())
+
+
+def test_coarse_block_pattern_is_that_of_the_coupling():
+    """_coupling_pattern (one pass with a marker) against np.unique of every entry's body-pair key."""
+    from vemdem.solver.linear.grain_block import _coupling_pattern
+
+    K, dof_ptr, _ = random_block_system(sizes=(24, 36, 30, 90, 12, 60, 18, 45), seed=5)
+    C = sp.csr_matrix(K - sp.block_diag([K[a:b, a:b] for a, b in zip(dof_ptr[:-1], dof_ptr[1:])]))
+    C.eliminate_zeros()
+    G = len(dof_ptr) - 1
+    dof_body = np.repeat(np.arange(G, dtype=np.int64), np.diff(dof_ptr))
+    keys, diagonal, slot = _coupling_pattern(C.indptr, C.indices, dof_ptr, dof_body)
+    rows = np.repeat(np.arange(C.shape[0]), np.diff(C.indptr))
+    entry_keys = dof_body[rows] * G + dof_body[C.indices]
+    expected, inverse = np.unique(np.concatenate([np.arange(G) * (G + 1), entry_keys]), return_inverse=True)
+    assert len(entry_keys) > 3 * G  # coupled: more than the diagonal
+    np.testing.assert_array_equal(keys, expected)
+    np.testing.assert_array_equal(diagonal, inverse[:G])
+    np.testing.assert_array_equal(slot, inverse[G:])

@@ -97,23 +97,17 @@ def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out):
 
 @njit(parallel=True, cache=True)
 def _coarse_blocks(blocks, block_ptr, dof_ptr, z, out):
-    """out[g] = Z_g^T B_g Z_g (6 x 6) for every grain; z (n, 6) holds Z's rows."""
+    """out[g] = Z_g^T B_g Z_g (6 x 6) for every grain; z (n, 6) holds Z's rows. Two BLAS products
+    per grain (about 3x faster than the scalar loops they replaced, docs/linear-solvers.md)."""
     for g in prange(len(dof_ptr) - 1):
         n = dof_ptr[g + 1] - dof_ptr[g]
         b0, p0 = block_ptr[g], dof_ptr[g]
-        bz = np.zeros((n, 6))
-        for i in range(n):
-            for j in range(n):
-                b = blocks[b0 + i * n + j]
-                if b != 0.0:
-                    for k in range(6):
-                        bz[i, k] += b * z[p0 + j, k]
-        for a in range(6):
+        zg = np.ascontiguousarray(z[p0 : p0 + n])
+        bz = np.dot(blocks[b0 : b0 + n * n].reshape(n, n), zg)
+        c = np.dot(zg.T, bz)
+        for a in range(6):  # element loops: a slice assignment compiles an error path (seconds)
             for k in range(6):
-                s = 0.0
-                for i in range(n):
-                    s += z[p0 + i, a] * bz[i, k]
-                out[g, a, k] = s
+                out[g, a, k] = c[a, k]
 
 
 @njit(cache=True, parallel=True)
@@ -154,13 +148,51 @@ def rigid_modes(x: np.ndarray, vertex_ptr: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _coupling_keys(indptr, indices, dof_body, n_bodies):
-    """Body-pair key b_i * G + b_j of every coupling entry."""
-    keys = np.empty(len(indices), np.int64)
-    for i in range(len(indptr) - 1):
-        for p in range(indptr[i], indptr[i + 1]):
-            keys[p] = dof_body[i] * n_bodies + dof_body[indices[p]]
-    return keys
+def _coupling_pattern(indptr, indices, dof_ptr, dof_body):
+    """The coarse matrix's block pattern: body-pair keys a G + b in increasing order (each body's
+    own block included), the slot of every body's diagonal block and of every coupling entry.
+    O(nnz) with one marker array, in place of np.unique on the entries' keys (a sort of every
+    coupling entry: 10 ms at 515 grains and 110,000 entries)."""
+    G = len(dof_ptr) - 1
+    mark = np.full(G, -1, np.int64)
+    pos = np.zeros(G, np.int64)
+    count = np.zeros(G + 1, np.int64)
+    for a in range(G):
+        mark[a] = a
+        count[a + 1] = 1
+        for i in range(dof_ptr[a], dof_ptr[a + 1]):
+            for p in range(indptr[i], indptr[i + 1]):
+                b = dof_body[indices[p]]
+                if mark[b] != a:
+                    mark[b] = a
+                    count[a + 1] += 1
+    offset = np.cumsum(count)
+    keys = np.empty(offset[G], np.int64)
+    diagonal = np.empty(G, np.int64)
+    slot = np.empty(len(indices), np.int64)
+    mark[:] = -1
+    for a in range(G):
+        o, m = offset[a], 1
+        mark[a] = a
+        keys[o] = a
+        for i in range(dof_ptr[a], dof_ptr[a + 1]):
+            for p in range(indptr[i], indptr[i + 1]):
+                b = dof_body[indices[p]]
+                if mark[b] != a:
+                    mark[b] = a
+                    keys[o + m] = b
+                    m += 1
+        neighbours = np.sort(keys[o : o + m])
+        for q in range(m):
+            keys[o + q] = neighbours[q]
+        for q in range(m):
+            pos[keys[o + q]] = o + q
+            keys[o + q] += a * G
+        diagonal[a] = pos[a]
+        for i in range(dof_ptr[a], dof_ptr[a + 1]):
+            for p in range(indptr[i], indptr[i + 1]):
+                slot[p] = pos[dof_body[indices[p]]]
+    return keys, diagonal, slot
 
 
 @njit(cache=True)
@@ -216,12 +248,11 @@ class _CoarseSpace:
         keys = np.arange(G, dtype=np.int64) * (G + 1)  # the diagonal blocks
         C = s.coupling if s.coupling is not None and s.coupling.nnz else None
         if C is not None:
-            dof_body = np.repeat(np.arange(G), np.diff(s.dof_ptr))
-            entry_keys = _coupling_keys(C.indptr, C.indices, dof_body, G)
-            keys, slot = np.unique(np.concatenate([keys, entry_keys]), return_inverse=True)
+            dof_body = np.repeat(np.arange(G, dtype=np.int64), np.diff(s.dof_ptr))
+            keys, diagonal, slot = _coupling_pattern(C.indptr, C.indices, s.dof_ptr, dof_body)
             blocks = np.zeros((len(keys), 6, 6))
-            blocks[slot[:G]] = local
-            _coupling_blocks(C.indptr, C.indices, C.data, self.z, slot[G:], blocks)
+            blocks[diagonal] = local
+            _coupling_blocks(C.indptr, C.indices, C.data, self.z, slot, blocks)
         else:
             blocks = local
         rows, cols = keys // G, keys % G
