@@ -87,7 +87,6 @@ CONFIG_CASES = [
     ("gamma below 1/2", DROP, setter("solver.gamma", 0.4), "solver.gamma"),
     ("negative energy_growth", DROP, setter("solver.energy_growth", -1.0), "solver.energy_growth"),
     ("mass scaling below 1", DROP, setter("solver.mass_scaling", 0.5), "solver.mass_scaling"),
-    ("rigid grains implicit", DROP, setter("model", {"grains": "rigid"}), "model.grains"),
     ("unknown grain model", DROP, setter("model", {"grains": "soft"}), "model.grains"),
     ("no grains", DROP, setter("grains", []), "grains"),
     ("grain without position", DROP, setter("grains.0.position", DELETE), "grains[0].position"),

@@ -83,8 +83,9 @@ def test_floor_carries_the_weight_at_rest(tmp_path):
 
 
 # the explicit runs use mass scaling so that a stable step is about a microsecond
-INTEGRATORS = [{}, {"integrator": "explicit", "mass_scaling": 1e4}, {"integrator": "explicit", "model": "rigid"}]
-IDS = ["implicit", "explicit", "rigid"]
+INTEGRATORS = [{}, {"integrator": "explicit", "mass_scaling": 1e4}, {"integrator": "explicit", "model": "rigid"},
+               {"model": "rigid"}]  # fmt: skip
+IDS = ["implicit", "explicit", "rigid", "rigid-implicit"]
 
 
 @pytest.mark.parametrize("solver", INTEGRATORS, ids=IDS)

@@ -147,7 +147,7 @@ SOLVER = {
 MODEL = {
     "grains": Field(
         ("flexible", "rigid"), "flexible",
-        doc="flexible: one virtual element per grain (the paper); rigid: six dofs per grain, explicit integrator only",
+        doc="flexible: one virtual element per grain (the paper); rigid: six dofs per grain (both integrators)",
     ),
 }
 
@@ -347,10 +347,6 @@ def check_rules(cfg: dict) -> None:
     if isinstance(tilt, dict) and isinstance(gravity, list) and (gravity[0] != 0 or gravity[1] != 0 or gravity[2] >= 0):
         raise ConfigError(f"gravity: the tilting box turns gravity from straight down; give [0, 0, -g], got "
                           f"{[float(v) for v in gravity]}")  # fmt: skip
-    model = cfg.get("model")
-    if isinstance(model, dict) and model.get("grains") == "rigid" and isinstance(solver, dict):
-        if solver.get("integrator") != "explicit":
-            raise ConfigError('model.grains: "rigid" has the explicit integrator only; set solver.integrator = "explicit"')
     _check_frames(cfg)
     lid = cfg.get("lid")
     if isinstance(lid, dict) and lid["end"] >= lid["start"]:

@@ -195,3 +195,59 @@ def gap_rates(x, v, ints, floats):
         if norm > 0.0:
             out[c] = (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) / norm
     return out
+
+
+@njit(cache=True)
+def rigid_pair_blocks(ints, pair_tangent, x_all, centre, vertex_grain, n_vertices):
+    """Z^T K_pair Z of every pair as up to four 6 x 6 grain blocks, for the rigid-grain Newton
+    matrix (solver/rigid_implicit.py); Z_i = [I, -[r_i]x], the rigid modes of vertex i about its
+    grain's centre. Returns rows, cols (grain indices, -1 where a node is a wall's) and blocks (4
+    per pair: AA, AB, BA, BB in the order the pair's grains appear)."""
+    m = len(ints)
+    rows = np.full(4 * m, -1, np.int64)
+    cols = np.full(4 * m, -1, np.int64)
+    blocks = np.zeros((4 * m, 6, 6))
+    Z = np.zeros((6, 3, 6))
+    for c in range(m):
+        nn = N_NODES[ints[c, KIND]]
+        body = np.full(6, -1, np.int64)
+        first, second = -1, -1
+        for i in range(nn):
+            node = ints[c, NODE0 + i]
+            if node < n_vertices:
+                g = vertex_grain[node]
+                body[i] = g
+                if first < 0:
+                    first = g
+                elif g != first and second < 0:
+                    second = g
+                r0 = x_all[node, 0] - centre[g, 0]
+                r1 = x_all[node, 1] - centre[g, 1]
+                r2 = x_all[node, 2] - centre[g, 2]
+                for a in range(3):
+                    for k in range(6):
+                        Z[i, a, k] = 0.0
+                    Z[i, a, a] = 1.0
+                # -[r]x: dx = dphi x r
+                Z[i, 0, 4], Z[i, 0, 5] = r2, -r1
+                Z[i, 1, 3], Z[i, 1, 5] = -r2, r0
+                Z[i, 2, 3], Z[i, 2, 4] = r1, -r0
+        for i in range(nn):
+            if body[i] < 0:
+                continue
+            for j in range(nn):
+                if body[j] < 0:
+                    continue
+                slot = 4 * c + (0 if body[i] == first else 2) + (0 if body[j] == first else 1)
+                rows[slot] = body[i]
+                cols[slot] = body[j]
+                for p in range(6):
+                    for q in range(6):
+                        s = 0.0
+                        for a in range(3):
+                            za = Z[i, a, p]
+                            if za != 0.0:
+                                for b in range(3):
+                                    s += za * pair_tangent[c, 3 * i + a, 3 * j + b] * Z[j, b, q]
+                        blocks[slot, p, q] += s
+    return rows, cols, blocks

@@ -125,7 +125,7 @@ class RigidBodies:
         return Evaluation(np.zeros(G), np.zeros_like(x) if force else None, np.zeros(36 * G) if tangent else None)
 
     def add_mass(self, blocks: np.ndarray, shift: float) -> None:
-        raise NotImplementedError("the rigid-grain mode has the explicit integrator only")
+        raise NotImplementedError("rigid grains have no vertex mass blocks: solver/rigid_implicit.py works on six dofs")
 
     def mass_matrix(self) -> sp.csr_matrix:
         """The consistent VEM mass on vertex velocities: exact for rigid motions (1/2 v.M v is the

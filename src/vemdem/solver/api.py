@@ -18,6 +18,7 @@ from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
 from .newmark import NewmarkParameters, advance, initial_state
 from .rigid import RigidExplicit
+from .rigid_implicit import RigidNewmark
 from .state import RunStats, State, StepControl
 
 INTEGRATORS = ("implicit", "explicit")
@@ -109,6 +110,27 @@ class RigidCentral(ExplicitCentral):
         return self.integrator.initial_state(x0, v0, history=history)
 
 
+class RigidImplicit(RigidCentral):
+    """Rigid grains, implicit: Newmark on centroids and angular momenta, the exact free rotation,
+    Newton on six dofs per grain (solver/rigid_implicit.py), in the explicit loop's step control."""
+
+    name = "implicit"
+
+    def __init__(self, scene: Scene, options: SolverOptions):
+        self.scene = scene
+        self.control = _control(options)
+        self.integrator = RigidNewmark(scene, ExplicitParameters(mass_damping=options.mass_damping),
+                                       beta=options.beta, gamma=options.gamma)  # fmt: skip
+
+    def advance(self, state, t_end, on_step, stats):
+        # the step to try next lives in the (checkpointed) control between calls, not cut short
+        # to land on t_end, so that a resumed run takes the same steps
+        self.integrator.next_dt = self.control.dt
+        state, stats = advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
+        self.control.dt = min(self.integrator.next_dt, self.control.dt_max)
+        return state, stats
+
+
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
                        entry_fraction=o.entry_fraction, energy_growth=o.energy_growth)  # fmt: skip
@@ -116,10 +138,7 @@ def _control(o: SolverOptions) -> StepControl:
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
     if scene.bodies.kind == "rigid":
-        if options.integrator != "explicit":
-            raise ValueError('rigid grains (model.grains = "rigid") have the explicit integrator only: '
-                             'set solver.integrator = "explicit"')  # fmt: skip
-        return RigidCentral(scene, options)
+        return RigidCentral(scene, options) if options.integrator == "explicit" else RigidImplicit(scene, options)
     if options.integrator == "explicit":
         return ExplicitCentral(scene, options)
     return ImplicitNewmark(scene, options)

@@ -238,7 +238,7 @@ def advance_explicit(integrator: ExplicitIntegrator, state: State, t_end: float,
         ints, floats = info.ints, info.floats
         control.dt = h
         stats.accepted += 1
-        stats.newton_iterations += 1
+        stats.newton_iterations += info.iterations  # 1 for an explicit step
         if on_step is not None:
             on_step(state, info, h)
     return state, stats
