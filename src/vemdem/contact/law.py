@@ -60,8 +60,9 @@ class InterfaceLaw:
 @njit(cache=True)
 def normal_force(g, p):
     """(f_n, k) at gap g: repulsive force magnitude and stiffness -df_n/dg. One definition for
-    real gaps and for the complex gaps of the complex-step friction tangent (friction.py): the
-    branches read the real part, the formulas carry the imaginary one."""
+    real gaps and for the complex gaps of the complex-step reference tangent (friction.py, the
+    tests' check of the analytic one): the branches read the real part, the formulas carry the
+    imaginary one."""
     zero = 0.0 * g
     if g.real >= p[GBAR]:
         return zero, zero

@@ -41,7 +41,7 @@ def _dot(a, b):
 @njit(cache=True)
 def vertex_face_coords(p, t0, t1, t2):
     """(u, v, det): barycentric coordinates of the projection of p on the triangle's plane, for
-    real or complex positions (the complex-step tangent of friction.py calls it too)."""
+    real or complex positions (the complex-step reference tangent of friction.py calls it too)."""
     e1 = t1 - t0
     e2 = t2 - t0
     r = p - t0
