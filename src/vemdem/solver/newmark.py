@@ -201,6 +201,46 @@ class _IncrementalPotential:
         return alpha
 
 
+def wall_time(scene: Scene, x, tw: float, t1: float, share: float) -> float:
+    """The latest time in [tw, t1] to which the moving plane walls can be advanced from x without
+    coming closer to any grain than 1 - share of its distance (a plane's distance is linear in its
+    own displacement, so one ratio per plane; rechecked where the motion has a corner within the
+    step, which can only shorten the advance)."""
+    t = t1
+    for _ in range(8):
+        s = _wall_share(scene, x, tw, t, share)
+        if s >= 1.0 - 1e-9:
+            return t
+        t = tw + s * (t - tw)
+    return tw
+
+
+def _wall_share(scene: Scene, x, tw: float, t: float, share: float) -> float:
+    s = 1.0
+    for p in scene.contact.planes:
+        if not (p.motion.active(tw) and p.motion.active(t)):
+            continue
+        approach = float((p.point_at(t) - p.point_at(tw)) @ p.normal)
+        if approach <= 0.0:
+            continue
+        d = float(plane_distances(x, scene.bodies.vertex_ptr, p.point_at(tw), p.normal).min())
+        s = min(s, share * max(d, 0.0) / approach)
+    return s
+
+
+def _wall_drive(contact, x, tw: float, t1: float, force, candidates, history, vel, a4) -> np.ndarray:
+    """(t1 - tw) d r_contact / d t_wall at x: the contact forces' change when the walls move on
+    from tw to t1, linearised (a backward difference, which moves the walls away from where they
+    are going and so never into a grain). Added to the residual, it makes Newton's correction
+    carry the grains the walls push (a lid) along with them."""
+    h = 1e-3 * (t1 - tw)
+    try:
+        back = contact.evaluate(x, tw - h, candidates, history, v=vel, a4=a4).force
+    except PenetrationError:
+        return np.zeros_like(force)
+    return (force - back) * ((t1 - tw) / h)
+
+
 def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameters) -> tuple[State, StepInfo]:
     b, gam = params.beta, params.gamma
     a1, a2, a3 = 1 / (b * dt * dt), 1 / (b * dt), 1 / (2 * b) - 1
@@ -224,6 +264,10 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
         x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, margin))
+    # A wall that moves further in a step than its gap to the grains (a lid pressing a pack) would
+    # start Newton behind a grain's surface: the walls start where they can go and move on to t1
+    # between iterations as the grains give way (wall_time); the step converges only with them at t1.
+    tw = wall_time(scene, x, state.t, t1, params.ccd_fraction)
     size = float(np.cbrt(scene.bodies.volume.mean()))
     linear = params.linear if params.linear is not None else _default_linear()
     krylov = 0
@@ -236,20 +280,22 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         vel = a4 * du + a5 * state.v + a6 * state.a
         try:
             el = scene.bodies.evaluate(x, tangent=True)
-            cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4, tangent=True)
+            cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
         inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
+        at_end = tw == t1
         if not np.all(np.isfinite(R)):
             raise StepRejected("non-finite residual")
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
         blocks, coupling = newton_blocks(scene, el, cr, a1 + params.mass_damping * a4)
         linear.factor(NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x))
-        dx = -linear.solve(R, params.krylov_rtol).reshape(-1, 3)
+        drive = 0.0 if at_end else _wall_drive(contact, x, tw, t1, cr.force, candidates, state.history, vel, a4).ravel()
+        dx = -linear.solve(R + drive, params.krylov_rtol).reshape(-1, 3)
         krylov += linear.stats.last_iterations
         path = _UpdatePath(scene, x, dx, params.update)
-        alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, t1, candidates, margin)
+        alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, tw, candidates, margin)
         # A pair that changes type or eligibility between iterations (a vertex crossing a face's
         # edge) changes the tangent discontinuously, and full updates can cycle between two states
         # (seen in a twelve-grain drop: the same |dx| every other iteration, never converging).
@@ -261,7 +307,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         if params.accuracy > 0:
             dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         r_norm = np.abs(R).max()
-        if (it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
+        if (at_end and it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
                 and r_norm > 0.5 * corrections[-2][1]):  # fmt: skip
             alpha = params.stall_share
         corrections.append((dx_norm, r_norm))
@@ -269,6 +315,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = path.at(alpha)
+        if not at_end:
+            tw = wall_time(scene, x, tw, t1, params.ccd_fraction)
         # With E ~ 1e11 Pa the internal forces carry round-off far above the gravity of a grain, so
         # the residual test alone can be out of reach: a full Newton correction that is tiny against
         # the step's displacement (quadratic convergence) also ends the iteration.
@@ -282,7 +330,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         )
         if params.trace is not None:
             params.trace(it, np.abs(R).max() / r_tol, dx_norm / dx_tol, alpha, cr)
-        if alpha == 1.0 and small_dx and (small_r or it > 1):
+        if at_end and alpha == 1.0 and small_dx and (small_r or it > 1):
             break
         full_before, dx_before = alpha == 1.0, dx_norm
     else:
