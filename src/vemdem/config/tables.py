@@ -106,7 +106,9 @@ CONTACT = {
     "mu_s": Field(float, 0.0, non_negative, "static friction coefficient"),
     "mu_d": Field(float, None, non_negative, "dynamic friction coefficient [mu_s]"),
     "activation_gap": Field(float, None, positive, "m [0.01 grain size]"),
-    "penalty": Field(float, None, positive, "eps1 [from 10 grain weights at the switch gap]"),
+    "reference_force": Field(float, None, positive, "N, force per contact at the switch gap, for loads far above "
+                             "the weight (a lid: its force over its contacts) [10 grain weights]"),
+    "penalty": Field(float, None, positive, "eps1 [from the reference force at the switch gap]"),
     "switch_factor": Field(float, None, open_unit_interval),
     "penalty_exponent": Field(float, None, _at_least(1)),
     "barrier_exponent": Field(float, None, lambda v: None if v < -1 else "must be < -1"),

@@ -71,7 +71,14 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "contact": {
             "activation_gap": scene.contact.law.activation_gap,
             "penalty": scene.contact.law.penalty,
+            "reference_force": _switch_force(scene.contact.law),
             "tangential_penalty": scene.contact.friction.tangential_penalty,
             "damping_ratio": scene.contact.friction.damping_ratio,
         },
     }
+
+
+def _switch_force(law) -> float:
+    """The normal force at the switch gap (the reference force F_ref, contact/defaults.py)."""
+    band = law.activation_gap * (1.0 - law.switch_factor)
+    return float(law.penalty * band**law.penalty_exponent)
