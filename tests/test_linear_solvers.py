@@ -192,3 +192,29 @@ def test_coarse_block_pattern_is_that_of_the_coupling():
     np.testing.assert_array_equal(keys, expected)
     np.testing.assert_array_equal(diagonal, inverse[:G])
     np.testing.assert_array_equal(slot, inverse[G:])
+
+
+@pytest.mark.parametrize("failure", ["gmres", "coarse"])
+def test_auto_hands_a_failed_system_to_the_direct_solver(monkeypatch, failure):
+    """Under a lid at the real density the grain-block path failed on some Newton systems (GMRES
+    at its iteration cap; a coarse matrix too ill-conditioned to factor) that a direct solve takes:
+    auto answers with the direct solution and counts the hand-over."""
+    import vemdem.solver.linear as linear
+    from vemdem.solver.linear import grain_block
+
+    monkeypatch.setattr(linear, "DENSE_LIMIT", 0)  # the grain-block path even for three cubes
+    system = real_system()
+    K = system.to_csr()
+    b = np.random.default_rng(4).normal(size=system.n)
+    solver = make_linear_solver("auto")
+    if failure == "gmres":
+        solver.block.max_iterations = 1
+    else:
+        def ill_conditioned(*args):
+            raise SingularSystemError("singular tangent (coarse space: singular matrix)")
+
+        monkeypatch.setattr(grain_block, "_CoarseSpace", ill_conditioned)
+    solver.factor(system)
+    x = solver.solve(b, 1e-10)
+    assert solver.stats.fallbacks == 1
+    np.testing.assert_allclose(x, spla.spsolve(K.tocsc(), b), rtol=0, atol=1e-9 * np.abs(x).max())

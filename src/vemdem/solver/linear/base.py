@@ -105,6 +105,7 @@ class SolverStats:
     solves: int = 0
     iterations: int = 0  # Krylov iterations, all solves
     last_iterations: int = 0
+    fallbacks: int = 0  # auto: systems handed to the direct solver after the iterative one failed
 
 
 class LinearSolver(Protocol):
