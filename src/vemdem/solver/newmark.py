@@ -261,9 +261,10 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         guess = state.v * dt + 0.5 * dt * dt * state.a
         if params.predictor == "rigid":  # each grain's rigid part of it only (no elastic noise)
             guess = rigid_part(state.x, guess, scene.bodies.lumped, scene.bodies.vertex_ptr)
-        _, ints0, floats0 = contact.pairs(state.x, t1, candidates)
+        # bounded against the walls where they stand (they may already be past a grain at t1)
+        _, ints0, floats0 = contact.pairs(state.x, state.t, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
-        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, t1, candidates, margin))
+        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, state.t, candidates, margin))
     # A wall that moves further in a step than its gap to the grains (a lid pressing a pack) would
     # start Newton behind a grain's surface: the walls start where they can go and move on to t1
     # between iterations as the grains give way (wall_time); the step converges only with them at t1.
