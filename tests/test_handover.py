@@ -97,3 +97,23 @@ def test_a_pack_from_another_mass_scaling_is_settled_again(tmp_path):
     before = (tmp_path / "pile" / "reequilibrate" / "state.npz").stat().st_mtime_ns
     pile.run(cfg, tmp_path / "pile")
     assert (tmp_path / "pile" / "reequilibrate" / "state.npz").stat().st_mtime_ns == before
+
+
+@pytest.mark.filterwarnings("ignore::vemdem.config.build.MassScalingWarning")
+def test_a_lid_run_at_another_mass_scaling_settles_its_pack_again(tmp_path):
+    """lid_compression has no output.every (its frames follow the lid); settling its pack again at
+    another scaling once stopped with a KeyError traceback."""
+    from vemdem.scenarios.registry import checked_config
+
+    box = 3.2e-3
+    pack_cfg, pack = checked_config({"scenario": "pack", "n_grains": 4, "seed": 5, "grains": {"vertices": 8, "size": 1.2e-3},
+                                     "box": {"width": box, "depth": box}, "settle": {"kinetic_threshold": 1e-2},
+                                     "output": {"vtk": False}})  # fmt: skip
+    pack.run(pack_cfg, tmp_path / "pack")
+    top = float(load_state(tmp_path / "pack" / "state.npz").x[:, 2].max())
+    cfg, lid = checked_config({"scenario": "lid_compression", "initial_state": str(tmp_path / "pack" / "state.npz"),
+                               "lid": {"start": top + 2e-4, "end": top + 1e-4, "speed": 0.05, "frames": 4},
+                               "solver": {"mass_scaling": 1e6, "integrator": "explicit"}, "output": {"vtk": False}})  # fmt: skip
+    lid.run(cfg, tmp_path / "lid")
+    assert load_state(tmp_path / "lid" / "reequilibrate" / "state.npz").meta["mass_scaling"] == 1e6
+    assert (tmp_path / "lid" / "force_strain.csv").is_file()

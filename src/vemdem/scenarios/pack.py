@@ -156,7 +156,9 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)
     label = progress and (lambda i, n, text="": progress(i, n, "re-equilibrate: " + text))
-    result = simulate(scene, integrator, folder, duration=stage["settle"]["max_time"], every=cfg["output"]["every"],
+    # lid_compression's output table has no `every` (its frames follow the lid): the pack's default
+    every = cfg["output"].get("every", SCHEMA["output"]["every"].default)
+    result = simulate(scene, integrator, folder, duration=stage["settle"]["max_time"], every=every,
                       vtk=False, fingerprint=fingerprint, x0=state.x, v0=np.zeros_like(state.v),
                       friction0=state.friction, resume=resume and (folder / "checkpoint.npz").is_file(),
                       progress=label, stop=at_rest(scene, stage["settle"], integrator.lumped))  # fmt: skip
