@@ -115,3 +115,37 @@ def test_rigid_twelve_grain_drop_makes_no_energy():
     assert drop > 0  # the grains fell and
     assert max(books) <= e0 + 0.01 * drop  # made no energy (1 % of the released potential)
     assert state.dissipated > 0.3 * drop  # the impacts dissipated (measured: 0.96 of the drop, balance -2.7 %)
+
+
+def test_wall_time_keeps_the_share_of_the_gap():
+    """wall_time against the closed form: a plane approaching at speed v from distance d may go on
+    for share d / v; a plane that stops (a corner in its motion) before using that share goes all
+    the way to the step's end; a plane moving away never limits."""
+    from vemdem.contact.walls import Motion, PlaneWall
+    from vemdem.geometry.shapes import cube
+    from vemdem.solver.newmark import wall_time
+
+    size, v, d, share = 1e-3, 0.02, 2e-6, 0.8
+    material = Material(90e9, 0.16, 2200.0)
+    law, friction = default_contact_laws(size, material.E, material.density, 9.81)
+    grain = cube(size)
+    top = float(grain.vertices[:, 2].max())
+
+    def scene_with(times, heights):
+        motion = Motion(times, [(0.0, 0.0, -h) for h in heights])
+        lid = PlaneWall((0.0, 0.0, top + d), (0.0, 0.0, -1.0), motion, "lid")
+        return Scene.build([grain], material, law, friction, planes=[lid], gravity=(0, 0, 0))
+
+    x = grain.vertices
+    steady = scene_with((0.0, 1.0), (0.0, v))
+    assert wall_time(steady, x, 0.0, 1e-3, share) == pytest.approx(share * d / v, rel=1e-9)
+    assert wall_time(steady, x, 0.0, 0.5 * share * d / v, share) == 0.5 * share * d / v  # room to spare
+    # stops after travelling half the gap (a corner in its motion): the step's end is reachable
+    stopping = scene_with((0.0, 0.5 * d / v, 1.0), (0.0, 0.5 * d, 0.5 * d))
+    assert wall_time(stopping, x, 0.0, 1e-3, share) == 1e-3
+    # slow, then fast (a corner inside the step): never past the share of the gap
+    speeding = scene_with((0.0, 5e-4, 1e-3), (0.0, 0.1 * d, 2 * d))
+    t = wall_time(speeding, x, 0.0, 1e-3, share)
+    assert 0 < t < 1e-3 and speeding.contact.planes[0].motion.displacement(t)[2] >= -share * d
+    receding = scene_with((0.0, 1.0), (0.0, -v))
+    assert wall_time(receding, x, 0.0, 1e-3, share) == 1e-3

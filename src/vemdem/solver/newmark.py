@@ -202,10 +202,11 @@ class _IncrementalPotential:
 
 
 def wall_time(scene: Scene, x, tw: float, t1: float, share: float) -> float:
-    """The latest time in [tw, t1] to which the moving plane walls can be advanced from x without
-    coming closer to any grain than 1 - share of its distance (a plane's distance is linear in its
-    own displacement, so one ratio per plane; rechecked where the motion has a corner within the
-    step, which can only shorten the advance)."""
+    """A time in [tw, t1] to which the moving plane walls can be advanced from x without coming
+    closer to any grain than 1 - share of its distance: the latest such time where the motion is
+    linear over the interval (a plane's distance is linear in its own displacement, so one ratio
+    per plane), an earlier one where the motion has a corner (the ratio is taken over the whole
+    interval and the shortened interval checked again)."""
     t = t1
     for _ in range(8):
         s = _wall_share(scene, x, tw, t, share)
