@@ -102,7 +102,6 @@ def test_reference_force_is_the_force_at_the_switch_gap():
     """`reference_force` (a lid run: its force over its contacts) replaces 10 grain weights as the
     force where the barrier takes over; the stiffness and the tangential penalty follow it."""
     from vemdem.contact.defaults import default_contact_laws
-    from vemdem.driver.summary import _switch_force
 
     d, E, rho = 1.45e-3, 90e9, 2200.0
     law, fr = default_contact_laws(d, E, rho, mu_s=0.15, reference_force=100.0)
@@ -110,4 +109,4 @@ def test_reference_force_is_the_force_at_the_switch_gap():
     assert f_switch == pytest.approx(100.0, rel=1e-12)
     assert k_switch == pytest.approx(2 * 100.0 / (law.activation_gap - law.switch_gap), rel=1e-12)  # n1 = 2
     assert fr.tangential_penalty == pytest.approx(k_switch, rel=1e-12)
-    assert _switch_force(law) == pytest.approx(100.0, rel=1e-12)
+    assert law.switch_force == pytest.approx(100.0, rel=1e-12)  # what summary.json reports

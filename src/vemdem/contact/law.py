@@ -48,6 +48,11 @@ class InterfaceLaw:
     def switch_gap(self) -> float:
         return self.switch_factor * self.activation_gap
 
+    @property
+    def switch_force(self) -> float:
+        """The normal force at the switch gap: the reference force F_ref (contact/defaults.py)."""
+        return float(normal_force(self.switch_gap, self.packed())[0])
+
     def packed(self) -> np.ndarray:
         gbar, n1, n2 = self.activation_gap, self.penalty_exponent, self.barrier_exponent
         gbb = self.switch_gap

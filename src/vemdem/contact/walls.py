@@ -47,6 +47,11 @@ class Motion:
     def active(self, t: float) -> bool:
         return t < self.removed_at
 
+    @property
+    def moves(self) -> bool:
+        """Whether the displacement history ever changes (a removal alone is not a motion)."""
+        return bool(np.ptp(np.asarray(self.displacements, float), axis=0).any())
+
 
 @dataclass(frozen=True)
 class PlaneWall:

@@ -6,8 +6,6 @@ from __future__ import annotations
 import csv
 import time
 
-import numpy as np
-
 from ..model.scene import Scene
 from .loop import Run
 
@@ -73,23 +71,17 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "contact": {
             "activation_gap": scene.contact.law.activation_gap,
             "penalty": scene.contact.law.penalty,
-            "reference_force": _switch_force(scene.contact.law),
+            "reference_force": scene.contact.law.switch_force,
             "tangential_penalty": scene.contact.friction.tangential_penalty,
             "damping_ratio": scene.contact.friction.damping_ratio,
         },
     }
 
 
-def _switch_force(law) -> float:
-    """The normal force at the switch gap (the reference force F_ref, contact/defaults.py)."""
-    band = law.activation_gap * (1.0 - law.switch_factor)
-    return float(law.penalty * band**law.penalty_exponent)
-
-
 def _books(scene: Scene, run: Run) -> dict | None:
     books = energy_balance(run.out_dir / "history.csv") if run.out_dir is not None else None
     walls = list(scene.contact.planes) + list(scene.contact.meshes)
-    if books is not None and any(np.ptp(np.asarray(w.motion.displacements, float), axis=0).any() for w in walls):
+    if books is not None and any(w.motion.moves for w in walls):
         # a lid's work is not in the books: a balance error would only measure it
         books["balance_error"] = None
         books["balance_error_reason"] = "walls moved: the work they did on the grains is not in the books"
