@@ -92,6 +92,29 @@ def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
     assert shape["low"][1] > 1.05 * shape["high"][1]  # measured 13-15 % wider
 
 
+def test_channel_collapse_runs_out_through_the_front_only(tmp_path, settled):
+    """`[collapse] open = "front"`: the back and side walls stay, so every grain stays behind the back
+    wall and between the side walls (a vertex a contact gap outside at most), grains leave through
+    the open +x side, and the runout is measured from the back wall beyond the box's width."""
+    pack_dir, _ = settled
+    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(pack_dir / "state.npz"),
+                         "collapse": {"open": "front"}, "contact": {"mu_s": 0.3, "mu_d": 0.2},
+                         "settle": {"max_time": 0.2}, "output": {"vtk": False}})  # fmt: skip
+    out = tmp_path / "channel"
+    summary = module.run(cfg, out)
+    final = load_state(out / "state.npz")
+    half = 0.5 * BOX
+    slack = 1e-2 * BOX
+    assert final.x[:, 0].min() > -half - slack
+    assert np.abs(final.x[:, 1]).max() < half + slack
+    ptr = np.cumsum([0] + [g.n_vertices for g in final.grains])
+    c = np.array([final.x[a:b].mean(axis=0) for a, b in zip(ptr[:-1], ptr[1:])])
+    assert c[:, 0].max() > half  # out through the front
+    assert summary["collapse_open"] == "front"
+    assert summary["runout"] == pytest.approx(c[:, 0].max() + half - BOX, abs=0.02 * BOX)
+    assert (out / "pile.png").stat().st_size > 10_000
+
+
 def test_lid_compression_cycle(tmp_path, settled):
     pack_dir, _ = settled
     state = load_state(pack_dir / "state.npz")

@@ -45,6 +45,11 @@ measures both and keeps the one whose line fits the flank with the smaller resid
 heap that kept its box's square plan is not read as a cone with gentle diagonals. The box
 walls are taken parallel to x and y.
 
+`plan="channel"` measures a wedge leaning on a back wall (a two-dimensional collapse: only the
+box's +x wall was removed, the grains spread along x between the side walls): the distance is
+x - centre[0] (centre[0] is the back wall), the surface cells are the ring's `width` cut into
+pieces of about two footprints, and the sectors are those strips along the channel.
+
 Pile height is the highest grain top above the floor. The heap's extent is the largest horizontal
 (Euclidean) distance of a grain centroid from the axis; its runout (one definition everywhere,
 `runout`) is that extent beyond the column's half width, 0 for a pile that did not spread.
@@ -60,7 +65,7 @@ from typing import Literal
 
 import numpy as np
 
-Plan = Literal["round", "square", "auto"]
+Plan = Literal["round", "square", "auto", "channel"]
 
 MIN_FIT_POINTS = 3
 CELL_FOOTPRINTS = 2.0  # surface cell area in grain_size^2
@@ -153,29 +158,48 @@ def floor_layer_top(bottoms: np.ndarray, tops: np.ndarray, grain_size: float, fl
 
 
 def plan_distance(xy: np.ndarray, centre: tuple[float, float], plan: str) -> np.ndarray:
-    """Horizontal distance from the axis in which the heap's flank is a straight line."""
+    """Horizontal distance from the axis (a channel: from its back wall) in which the heap's flank
+    is a straight line."""
+    if plan == "channel":
+        return xy[:, 0] - centre[0]
     dx = np.abs(xy[:, 0] - centre[0])
     dy = np.abs(xy[:, 1] - centre[1])
     return np.hypot(dx, dy) if plan == "round" else np.maximum(dx, dy)
 
 
-def _turns(azimuth: np.ndarray) -> np.ndarray:
-    """Azimuth as a fraction of a full turn, in [0, 1)."""
+def _turns(xy: np.ndarray, centre: tuple[float, float], plan: str, width: float) -> np.ndarray:
+    """Where each point lies around its ring, as a fraction in [0, 1): the azimuth over a full turn,
+    or in a channel the position across its width."""
+    if plan == "channel":
+        return np.clip((xy[:, 1] - centre[1]) / width + 0.5, 0.0, np.nextafter(1.0, 0.0))
+    azimuth = np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0])
     return np.mod(azimuth, 2 * math.pi) / (2 * math.pi)
+
+
+def _ring_areas(ring: np.ndarray, plan: str, width: float) -> np.ndarray:
+    """Area of each ring one grain size wide, in grain_size^2 (width: the channel's, in grain sizes)."""
+    if plan == "channel":
+        return np.full(ring.shape, width)
+    return _LEVEL_SET_PERIMETER[plan] * (ring + 0.5)
+
+
+def _cells(ring_area: np.ndarray) -> np.ndarray:
+    return np.maximum(1, np.rint(ring_area / CELL_FOOTPRINTS)).astype(np.int64)
 
 
 def surface_grains(
     distance: np.ndarray,
-    azimuth: np.ndarray,
+    turn: np.ndarray,
     tops: np.ndarray,
     grain_size: float,
     plan: str,
+    width: float = 0.0,
 ) -> np.ndarray:
-    """Indices of the highest grain in each surface cell (module docstring, step 2)."""
+    """Indices of the highest grain in each surface cell (module docstring, step 2). turn: where
+    each grain lies around its ring, in [0, 1) (`_turns`); width: a channel's, in grain sizes."""
     ring = np.floor(distance / grain_size).astype(np.int64)
-    ring_area = _LEVEL_SET_PERIMETER[plan] * (ring + 0.5)  # in grain_size^2
-    n_cells = np.maximum(1, np.rint(ring_area / CELL_FOOTPRINTS)).astype(np.int64)
-    cell_in_ring = np.minimum(np.floor(_turns(azimuth) * n_cells), n_cells - 1)
+    n_cells = _cells(_ring_areas(ring, plan, width))
+    cell_in_ring = np.minimum(np.floor(turn * n_cells), n_cells - 1)
     cell = ring * (n_cells.max() + 1) + cell_in_ring.astype(np.int64)
     order = np.lexsort((tops, cell))
     last_of_cell = np.r_[cell[order][1:] != cell[order][:-1], True]
@@ -280,15 +304,18 @@ def _measure(
     n_sectors: int,
     toe: float,
     crest: float,
+    width: float,
 ) -> tuple[ReposeResult, float]:
     """The measurement with one distance, and the residual std of its flank fit."""
     xy = centroids[:, :2]
     distance = plan_distance(xy, centre, plan)
-    azimuth = np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0])
-    chosen = surface_grains(distance, azimuth, tops, grain_size, plan)
+    turn = _turns(xy, centre, plan, width)
+    chosen = surface_grains(distance, turn, tops, grain_size, plan, width / grain_size)
     r, h = distance[chosen], tops[chosen] - floor
     used, line = _flank(r, h, grain_size, toe, crest, layer_top)
-    sector = np.floor(_turns(azimuth[chosen]) * n_sectors).astype(np.int64)
+    if plan == "channel":  # the strips along the channel: one per surface cell across it
+        n_sectors = int(_cells(np.array([width / grain_size]))[0])
+    sector = np.floor(turn[chosen] * n_sectors).astype(np.int64)
     sector_angles = _sector_angles(r[used], h[used], sector[used], n_sectors)
     sector_se = _standard_error(sector_angles)
     fit_se = _angle_stderr_deg(line.slope, line.slope_stderr)
@@ -301,7 +328,7 @@ def _measure(
         sector_angles_deg=sector_angles,
         intercept=line.intercept,
         pile_height=float(tops.max() - floor),
-        extent=float(np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]).max()),
+        extent=float(_extent(xy, centre, plan)),
         profile_r=r,
         profile_h=h,
         used_mask=used,
@@ -310,6 +337,13 @@ def _measure(
         floor=floor,
     )
     return result, line.residual_std
+
+
+def _extent(xy: np.ndarray, centre: tuple[float, float], plan: str) -> float:
+    """Largest horizontal distance of a centroid from the axis (Euclidean), or from a channel's back wall."""
+    if plan == "channel":
+        return float(plan_distance(xy, centre, plan).max())
+    return float(np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]).max())
 
 
 def angle_of_repose(
@@ -324,27 +358,31 @@ def angle_of_repose(
     n_sectors: int = 8,
     toe: float = 1.5,
     crest: float = 0.5,
+    width: float | None = None,
 ) -> ReposeResult:
     """Angle of repose of a settled heap from its grain centroids (G, 3).
 
     vertices (N, 3) with vertex_grain (N,) give the grains' tops; without them a grain's
     top is its centroid + grain_size / 2. centre defaults to the grains' horizontal
     centroid. toe and crest bound the flank in grain sizes (above the floor, below the
-    highest top). Raises ValueError when the heap has no flank to fit.
+    highest top). plan="channel" needs centre = (x of the back wall, y of the channel's axis)
+    and the channel's width. Raises ValueError when the heap has no flank to fit.
     """
     centroids = np.asarray(centroids, dtype=float)
     if centroids.ndim != 2 or centroids.shape[1] != 3 or len(centroids) == 0:
         raise ValueError(f"centroids must be a non-empty (G, 3) array, got shape {centroids.shape}")
     if not grain_size > 0:
         raise ValueError(f"grain_size must be > 0, got {grain_size}")
-    if plan not in ("round", "square", "auto"):
-        raise ValueError(f"plan must be 'round', 'square' or 'auto', got {plan!r}")
+    if plan not in ("round", "square", "auto", "channel"):
+        raise ValueError(f"plan must be 'round', 'square', 'auto' or 'channel', got {plan!r}")
+    if plan == "channel" and (centre is None or width is None or not width > 0):
+        raise ValueError("plan 'channel' needs the back wall and axis as centre and the channel's width > 0")
     bottoms, tops = grain_heights(centroids, grain_size, vertices, vertex_grain)
     layer_top = floor_layer_top(bottoms, tops, grain_size, floor)
     cx, cy = centroids[:, :2].mean(axis=0) if centre is None else centre
     centre = (float(cx), float(cy))
     args = (centroids, tops, layer_top, grain_size, floor, centre)
-    options = (n_sectors, toe, crest)
+    options = (n_sectors, toe, crest, width or 0.0)
     if plan != "auto":
         return _measure(*args, plan, *options)[0]
     measured, errors = [], []
@@ -363,18 +401,26 @@ def runout(extent: float, half_width: float) -> float:
     return extent - half_width
 
 
-def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict):
+def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict,
+                 channel: bool = False):  # fmt: skip
     """(ReposeResult or None, summary figures) of a settled pile at vertex positions x.
     pile_height: highest grain top above the floor; runout: largest horizontal distance of a grain
     centroid from the box axis minus the box's half width (0 for a pile that did not spread); both
-    also for a heap too flat for an angle, which gets angle_of_repose_deg = None and the reason."""
-    centre = tuple(meta.get("centre", (0.0, 0.0)))
+    also for a heap too flat for an angle, which gets angle_of_repose_deg = None and the reason.
+    channel: only the box's +x wall was removed (`plan="channel"`): distances from the back wall,
+    and the runout beyond the box's width."""
     floor = meta.get("floor", 0.0)
-    extent = float(np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1]).max())
-    figures = {"pile_height": float(x[:, 2].max() - floor), "runout": runout(extent, 0.5 * min(meta["box"]))}
+    width, depth = meta["box"]
+    cx, cy = meta.get("centre", (0.0, 0.0))
+    if channel:
+        centre, plan, column, across = (cx - 0.5 * width, cy), "channel", width, depth
+    else:
+        centre, plan, column, across = (cx, cy), "auto", 0.5 * min(width, depth), None
+    extent = _extent(centroids[:, :2], centre, plan)
+    figures = {"pile_height": float(x[:, 2].max() - floor), "runout": runout(extent, column)}
     try:
         result = angle_of_repose(centroids, grain_size, vertices=x, vertex_grain=vertex_grain, floor=floor,
-                                 centre=centre)  # fmt: skip
+                                 centre=centre, plan=plan, width=across)  # fmt: skip
     except ValueError as exc:
         return None, {"angle_of_repose_deg": None, "angle_of_repose_error": str(exc), **figures}
     return result, {
@@ -428,25 +474,28 @@ def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: st
         lw=2,
         label=f"fit: {result.angle_deg:.1f}° ± {result.uncertainty_deg:.1f}°",
     )
-    distance_name = "distance from the axis" if result.plan == "round" else "max(|dx|, |dy|) from the axis"
+    distance_name = {"round": "distance from the axis", "square": "max(|dx|, |dy|) from the axis",
+                     "channel": "distance from the back wall"}[result.plan]  # fmt: skip
     ax.set_xlabel(f"{distance_name} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     ax.set_title(f"{title}: angle of repose" if title else "angle of repose")
     _save_side_view(fig, ax, path)
 
 
-def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, title: str = "", note: str = "") -> None:
+def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, title: str = "", note: str = "",
+              plan: str = "round") -> None:  # fmt: skip
     """Side view of a heap without a fitted flank (too flat or too small to measure): every
-    centroid at (distance from the axis, height), with `note` saying why there is no fit."""
+    centroid at (distance from the axis, or from a channel's back wall, height), with `note`
+    saying why there is no fit."""
     from .plots import plt  # the package's Agg backend
 
     mm = 1e3
     centroids = np.asarray(centroids, dtype=float)
-    distance = np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1])
+    distance = plan_distance(centroids[:, :2], centre, plan if plan == "channel" else "round")
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     ax.axhline(0.0, color="k", lw=0.8)
     ax.scatter(distance * mm, centroids[:, 2] * mm, s=10, c="0.4", label="grain centroids")
-    ax.set_xlabel("distance from the axis (mm)")
+    ax.set_xlabel(f"distance from the {'back wall' if plan == 'channel' else 'axis'} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     # the note goes under the title: inside the axes it covered a flat heap's thin plot
     ax.set_title((title or "heap") + ("\n" + textwrap.fill(note, 90) if note else ""), fontsize=9 if note else None)

@@ -270,6 +270,13 @@ PILE_COLLAPSE = {
     "scenario": Field(("pile_collapse",), REQUIRED),
     "initial_state": INITIAL_STATE,
     "pack": pack_stage(),
+    "collapse": {
+        "open": Field(("all", "front"), "all",
+                      doc="which walls go at t = 0: all (the paper's experiment: the column spreads around its axis "
+                          "into a heap) or front (only the +x wall: the grains run out along the channel of the "
+                          "back and side walls, a two-dimensional collapse whose deposit leans on the back wall; "
+                          "a flank as tall from about a third of the grains a cone needs)"),
+    },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }
 PILE_COLLAPSE["settle"] = with_defaults(SETTLE, min_time=0.05)  # the pile must first start to move

@@ -1,4 +1,6 @@
-"""`scenario = "pile_collapse"`: a settled pack loses its four walls and spreads on the floor.
+"""`scenario = "pile_collapse"`: a settled pack loses its four walls and spreads on the floor,
+or (`[collapse] open = "front"`) loses only its +x wall and runs out along the channel the others
+form, leaving a wedge on the back wall (a two-dimensional collapse).
 
 Starts from a `pack` state file (`initial_state = "path/state.npz"`, relative to the config file)
 or settles the `[pack]` table first, and runs until the pile is at rest (settle table) or
@@ -33,14 +35,19 @@ RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.PILE_COLLAPSE
 
 
+def standing_walls(meta: dict, channel: bool) -> list:
+    """The walls left at t = 0: the floor, and for a channel the back (-x) and side walls too."""
+    floor, back, _front, *sides = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
+    return [floor, back, *sides] if channel else [floor]
+
+
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = initial.meta
-    # the four walls are gone from t = 0: only the floor remains
-    floor = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))[:1]
-    scene = scene_from(initial.grains, cfg, floor)
+    channel = cfg["collapse"]["open"] == "front"
+    scene = scene_from(initial.grains, cfg, standing_walls(meta, channel))
     integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
@@ -51,20 +58,23 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     state = result.state
     centroids = scene.grain_centroids(state.x)
     repose, figures = measure_pile(centroids, state.x, scene.contact.topology.vertex_grain[: scene.n_vertices],
-                                   scene.grain_size, meta)  # fmt: skip
+                                   scene.grain_size, meta, channel)  # fmt: skip
     friction = scene.contact.friction
     title = f"{scene.n_grains} grains, mu_s = {friction.mu_s:g}, mu_d = {friction.mu_d:g}"
     if repose is not None:
         plot_pile(repose, centroids, out_dir / "pile.png", title=title)
     else:
-        plot_heap(centroids, tuple(meta["centre"]), out_dir / "pile.png", title,
-                  note=f"no angle of repose: {figures['angle_of_repose_error']}")  # fmt: skip
+        centre = (meta["centre"][0] - 0.5 * meta["box"][0], meta["centre"][1]) if channel else tuple(meta["centre"])
+        plot_heap(centroids, centre, out_dir / "pile.png", title,
+                  note=f"no angle of repose: {figures['angle_of_repose_error']}",
+                  plan="channel" if channel else "round")  # fmt: skip
     plot_grains_3d(out_dir / "pile_3d.png", state.x, *scene.surface_triangles(), title=f"the heap: {title}",
                    floor_z=meta["floor"])  # fmt: skip
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
                {**meta, "scenario": "pile_collapse", "time": state.t}, friction_arrays(state.history))  # fmt: skip
     summary = run_summary("pile_collapse", scene, result, t_start)
     summary.update(figures)
+    summary["collapse_open"] = cfg["collapse"]["open"]
     summary["settled"] = result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["initial_state"] = str(path)
