@@ -144,6 +144,7 @@ class ContactModel:
         size = scene_size or float(np.ptp(reference, axis=0).max())
         # plane triangles (p, p + s t1, p + s t2), t1, t2 an orthonormal basis of the plane
         self._plane_frames = [self._plane_frame(pl.normal, size) for pl in self.planes]
+        self._wall_nodes_at = None  # (t, the wall nodes at t): wall_nodes' last answer
         mesh_vertices = [np.asarray(m.vertices, float) for m in self.meshes]
         surf_ptr = np.concatenate([self.vertex_ptr, self.n_vertices + np.cumsum([0] + [len(v) for v in mesh_vertices])[1:]])
         all_ref = np.vstack([reference] + mesh_vertices) if mesh_vertices else reference
@@ -162,9 +163,16 @@ class ContactModel:
 
     # ------------------------------------------------------------------ positions of wall nodes
     def wall_nodes(self, t: float) -> np.ndarray:
+        """Positions of the walls' nodes at t (read-only; the walls' motions are prescribed, so the
+        last time's positions are kept: a Newton iteration asks for them several times)."""
+        if self._wall_nodes_at is not None and self._wall_nodes_at[0] == t:
+            return self._wall_nodes_at[1]
         nodes = [m.vertices_at(t) for m in self.meshes]
         nodes += [pl.point_at(t) + frame for pl, frame in zip(self.planes, self._plane_frames)]
-        return np.vstack(nodes) if nodes else np.zeros((0, 3))
+        out = np.vstack(nodes) if nodes else np.zeros((0, 3))
+        out.setflags(write=False)
+        self._wall_nodes_at = (t, out)
+        return out
 
     def all_positions(self, x: np.ndarray, t: float) -> np.ndarray:
         return np.ascontiguousarray(np.vstack([x, self.wall_nodes(t)]))
