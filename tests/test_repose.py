@@ -43,14 +43,20 @@ def synthetic_heap(angle_deg, seed, shape="cone", height=FLANK_HEIGHT):
     distance = np.hypot(x, y) if shape == "cone" else np.maximum(abs(x), abs(y))
     surface = np.minimum(slope * (base - distance), height)
     top = surface - rng.uniform(0, D, x.size)
+    return hang_columns(x, y, top, height, distance <= base + TOE_WIDTH, CENTRE), base
+
+
+def hang_columns(x, y, top, height, in_toe, origin):
+    """Centroids of the columns at (x, y) + origin whose top grain's top is at `top`, stacked down to
+    the floor; where the top is below D (the flank has reached the floor) and `in_toe`, one grain
+    lies on the floor."""
     layers = np.arange(math.ceil(height / D))
     z = top[:, None] - D / 2 - layers[None, :] * D
     stacked = z >= D / 2
-    toe = (top < D) & (distance <= base + TOE_WIDTH)
+    toe = (top < D) & in_toe
     column = np.r_[np.nonzero(stacked)[0], np.nonzero(toe)[0]]
     heights = np.r_[z[stacked], np.full(toe.sum(), D / 2)]
-    centroids = np.column_stack([x[column] + CENTRE[0], y[column] + CENTRE[1], heights])
-    return centroids, base
+    return np.column_stack([x[column] + origin[0], y[column] + origin[1], heights])
 
 
 def octahedra(centroids):
@@ -217,13 +223,7 @@ def synthetic_wedge(angle_deg, seed, height=5 * D, crest=1.5 * D):
     x = (i.ravel() + 0.5) * D + rng.uniform(-JITTER, JITTER, i.size)
     y = (j.ravel() + 0.5) * CHANNEL / ny - CHANNEL / 2 + rng.uniform(-JITTER, JITTER, i.size)
     top = np.minimum(slope * (base - x), height) - rng.uniform(0, D, x.size)
-    layers = np.arange(math.ceil(height / D))
-    z = top[:, None] - D / 2 - layers[None, :] * D
-    stacked = z >= D / 2
-    toe = (top < D) & (x <= base + TOE_WIDTH)
-    column = np.r_[np.nonzero(stacked)[0], np.nonzero(toe)[0]]
-    heights = np.r_[z[stacked], np.full(toe.sum(), D / 2)]
-    return np.column_stack([x[column] + BACK[0], y[column] + BACK[1], heights]), base
+    return hang_columns(x, y, top, height, x <= base + TOE_WIDTH, BACK), base
 
 
 @pytest.mark.parametrize("seed", range(4))
