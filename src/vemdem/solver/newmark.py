@@ -59,6 +59,12 @@ class NewmarkParameters:
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
     update: str = "rigid"  # "rigid": each grain's rigid part as a finite rotation (model.motion); "linear": x + alpha dx
     stall_share: float = 0.5  # share of a full update taken when Newton stalls or cycles (from the 4th iteration)
+    # A stalled iteration (from the 4th) also ends when its residual is within stall_rtol of the residual
+    # tolerance and its correction within stall_xtol of the correction tolerance (1e-5 of the step's
+    # displacement): a pair creeping along its friction cone's edge switches between stick and slip every
+    # iteration there, and the correction cycles without going below 1e-8 (docs/dynamics.md). 0: off.
+    stall_rtol: float = 10.0
+    stall_xtol: float = 1e3
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
@@ -334,6 +340,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             params.trace(it, np.abs(R).max() / r_tol, dx_norm / dx_tol, alpha, cr)
         if at_end and alpha == 1.0 and small_dx and (small_r or it > 1):
             break
+        if at_end and it >= 4 and r_norm <= params.stall_rtol * r_tol and dx_norm <= params.stall_xtol * dx_tol:
+            break  # stalled at the tolerance (stall_rtol above)
         full_before, dx_before = alpha == 1.0, dx_norm
     else:
         raise StepRejected(f"Newton did not converge in {params.max_iterations} iterations")
