@@ -8,7 +8,7 @@ helps):
     Z      (n x 6G): the 6 rigid modes of every grain, translations e_k and rotations
                      e_k x (x_i - c_g) / s_g on its vertices (s_g: the grain's size)
     A_c    = Z^T K Z (6G x 6G: grain 6 x 6 blocks + the coupling's), LAPACK LU up to
-                     DENSE_COARSE_BODIES bodies, SuperLU beyond
+                     DENSE_COARSE_BODIES (40) bodies, SuperLU beyond
     y_1    = Z A_c^-1 Z^T r                       coarse correction
     y      = y_1 + B^-1 (r - K y_1)               block solve of what is left
 
@@ -230,10 +230,12 @@ def _prolong(z, dof_ptr, c, out):
             out[i] = s
 
 
-# Up to this many bodies the coarse matrix is factorised dense (LAPACK): at 24 grains SuperLU
-# and the sparse products around it cost 1 ms per Newton iteration, the dense LU 0.05 ms; at 515
-# grains the dense LU of a 3090 x 3090 matrix would cost more than the sparse one.
-DENSE_COARSE_BODIES = 150
+# Up to this many bodies the coarse matrix is factorised dense (LAPACK), beyond by SuperLU. Build,
+# factorise and solve, one BLAS thread, block-sparse coarse matrices with 3 coupled neighbours per
+# body (benchmarks/bench_coarse.py, 2026-11-25): dense 0.17 / 0.75 / 1.6 / 5.6 / 20.3 ms at
+# 24 / 40 / 64 / 100 / 150 bodies, SuperLU 0.74 / 1.0 / 1.1 / 1.9 / 3.1 ms: the crossover lies
+# between 40 and 64 (it was 150, set from a faster machine's 24-grain figure).
+DENSE_COARSE_BODIES = 40
 
 
 class _CoarseSpace:
