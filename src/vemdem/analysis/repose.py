@@ -328,7 +328,7 @@ def _measure(
         sector_angles_deg=sector_angles,
         intercept=line.intercept,
         pile_height=float(tops.max() - floor),
-        extent=float(_extent(xy, centre, plan)),
+        extent=_extent(xy, centre, plan),
         profile_r=r,
         profile_h=h,
         used_mask=used,
@@ -401,6 +401,17 @@ def runout(extent: float, half_width: float) -> float:
     return extent - half_width
 
 
+def pile_axis(meta: dict, channel: bool = False):
+    """(centre, plan, column, across) of a pile from its pack's box: the box axis and "auto" with the
+    column's half width, or for a channel its back wall ("channel") with the box's width as the
+    column and its depth across; distances in the plots and figures are taken from `centre`."""
+    width, depth = meta["box"]
+    cx, cy = meta.get("centre", (0.0, 0.0))
+    if channel:
+        return (cx - 0.5 * width, cy), "channel", width, depth
+    return (cx, cy), "auto", 0.5 * min(width, depth), None
+
+
 def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict,
                  channel: bool = False):  # fmt: skip
     """(ReposeResult or None, summary figures) of a settled pile at vertex positions x.
@@ -410,12 +421,7 @@ def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray,
     channel: only the box's +x wall was removed (`plan="channel"`): distances from the back wall,
     and the runout beyond the box's width."""
     floor = meta.get("floor", 0.0)
-    width, depth = meta["box"]
-    cx, cy = meta.get("centre", (0.0, 0.0))
-    if channel:
-        centre, plan, column, across = (cx - 0.5 * width, cy), "channel", width, depth
-    else:
-        centre, plan, column, across = (cx, cy), "auto", 0.5 * min(width, depth), None
+    centre, plan, column, across = pile_axis(meta, channel)
     extent = _extent(centroids[:, :2], centre, plan)
     figures = {"pile_height": float(x[:, 2].max() - floor), "runout": runout(extent, column)}
     try:

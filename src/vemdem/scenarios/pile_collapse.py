@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from ..analysis.plots import plot_grains_3d
-from ..analysis.repose import measure_pile, plot_heap, plot_pile
+from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls
@@ -64,10 +64,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     if repose is not None:
         plot_pile(repose, centroids, out_dir / "pile.png", title=title)
     else:
-        centre = (meta["centre"][0] - 0.5 * meta["box"][0], meta["centre"][1]) if channel else tuple(meta["centre"])
+        centre, plan, _, _ = pile_axis(meta, channel)
         plot_heap(centroids, centre, out_dir / "pile.png", title,
-                  note=f"no angle of repose: {figures['angle_of_repose_error']}",
-                  plan="channel" if channel else "round")  # fmt: skip
+                  note=f"no angle of repose: {figures['angle_of_repose_error']}", plan=plan)  # fmt: skip
     plot_grains_3d(out_dir / "pile_3d.png", state.x, *scene.surface_triangles(), title=f"the heap: {title}",
                    floor_z=meta["floor"])  # fmt: skip
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
