@@ -243,3 +243,40 @@ def test_analytic_friction_tangent_is_the_complex_step_derivative(rng):
         scale = np.abs(reference[c]).max()
         assert scale > 0
         np.testing.assert_allclose(analytic[c], reference[c], rtol=0, atol=1e-9 * scale, err_msg=f"pair {c}")
+
+
+def test_plane_pairs_match_ipctk_and_the_general_face_lcp():
+    """Vertex-plane records (contact/model._plane_records, compiled): every vertex within the
+    activation gap of each plane, no other, with the gap of ipctk's signed point-plane distance
+    and the barycentric coordinates the general vertex-face LCP gives on the plane's triangle."""
+    import ipctk
+
+    from vemdem.contact.narrow import vertex_face_coords
+    from vemdem.contact.pairs import FEATURE_A, GAP, GRAIN_B, NODE0
+
+    R = rotation_matrix([0.3, -0.5, 0.8])
+    c = cube(1e-3)
+    x = c.vertices @ R.T
+    gbar = 0.6e-3  # wide: several vertices per plane, at several gaps
+    law = InterfaceLaw(activation_gap=gbar, penalty=1e3)
+    normals = [np.array([0.2, 0.1, 1.0]), np.array([-1.0, 0.3, 0.2])]
+    planes = [PlaneWall(-0.95e-3 * n / np.linalg.norm(n), n / np.linalg.norm(n), name=f"w{k}") for k, n in enumerate(normals)]
+    model = ContactModel(c.vertices, [c.faces], np.array([0, 8]), np.array([1.0]), law, FRICTION, planes=planes)
+    x_all, ints, floats = model.pairs(x, 0.0, model.search(x, 0.0))
+    found = 0
+    for w, plane in enumerate(planes):
+        tri = x_all[model.plane_node0 + 3 * w : model.plane_node0 + 3 * w + 3]
+        gaps = np.array([ipctk.point_plane_signed_distance(p, *tri) for p in x])
+        rows = ints[:, GRAIN_B] == 1 + w
+        np.testing.assert_array_equal(ints[rows, FEATURE_A], np.flatnonzero(gaps <= gbar))
+        assert 0 < rows.sum() < 8  # the test sees both sides of the gap
+        for r, f in zip(ints[rows], floats[rows]):
+            u, v, _ = vertex_face_coords(x[r[FEATURE_A]], *tri)
+            np.testing.assert_allclose(f[:2], [u, v], rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(f[GAP], gaps[r[FEATURE_A]], rtol=1e-12, atol=1e-18)
+            np.testing.assert_array_equal(r[NODE0 + 1 : NODE0 + 4], model.plane_node0 + 3 * w + np.arange(3))
+        found += rows.sum()
+    assert found == len(ints)
+    deeper = x - 0.3e-3 * planes[1].normal  # past the second wall only
+    with pytest.raises(PenetrationError, match="behind wall 'w1'"):
+        model.pairs(deeper, 0.0, model.search(deeper, 0.0))

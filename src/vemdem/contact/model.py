@@ -73,13 +73,54 @@ def pair_keys(ints: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)  # serial: a few flops per vertex, less than a parallel region's start-up on a busy machine
-def _plane_candidates(x, n_vertices, point, normal, gbar, flags, signed):
-    for v in range(n_vertices):
-        d = 0.0
-        for a in range(3):
-            d += (x[v, a] - point[a]) * normal[a]
-        signed[v] = d
-        flags[v] = d <= gbar
+def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar):
+    """Vertex-face records of every vertex within gbar of a plane (planes in order, vertices in
+    order within each). A plane's triangle starts at its point (x[node0]) and has orthogonal legs
+    e1, e2 (_plane_frame), so the closest-point coordinates are plain projections, what
+    vertex_face_lcp solves for a general triangle. Returns (ints, floats, wall, vertex): wall >= 0
+    names the first plane with a vertex on its wrong side, and vertex the deepest one there."""
+    P = len(node0)
+    signed = np.empty((P, n_vertices))
+    count = 0
+    for w in range(P):
+        p, nrm = x[node0[w]], normals[w]
+        deepest, at = np.inf, -1
+        for v in range(n_vertices):
+            d = 0.0
+            for a in range(3):
+                d += (x[v, a] - p[a]) * nrm[a]
+            signed[w, v] = d
+            if d < deepest:
+                deepest, at = d, v
+            if d <= gbar:
+                count += 1
+        if deepest <= 0.0:
+            return np.empty((0, INT_COLS), np.int64), np.empty((0, FLOAT_COLS)), w, at
+    ints = np.full((count, INT_COLS), -1, np.int64)
+    floats = np.empty((count, FLOAT_COLS))
+    k = 0
+    for w in range(P):
+        n0 = node0[w]
+        e1, e2 = x[n0 + 1] - x[n0], x[n0 + 2] - x[n0]
+        e11 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
+        e22 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
+        for v in range(n_vertices):
+            if signed[w, v] > gbar:
+                continue
+            ints[k, KIND] = VERTEX_FACE
+            ints[k, GRAIN_A] = vertex_grain[v]
+            ints[k, GRAIN_B] = body[w]
+            ints[k, FEATURE_A] = v
+            ints[k, FEATURE_B] = face[w]
+            ints[k, NODE0] = v
+            for j in range(3):
+                ints[k, NODE0 + 1 + j] = n0 + j
+            r0, r1, r2 = x[v, 0] - x[n0, 0], x[v, 1] - x[n0, 1], x[v, 2] - x[n0, 2]
+            floats[k, 0] = (r0 * e1[0] + r1 * e1[1] + r2 * e1[2]) / e11
+            floats[k, 1] = (r0 * e2[0] + r1 * e2[1] + r2 * e2[2]) / e22
+            floats[k, 2] = signed[w, v]
+            k += 1
+    return ints, floats, -1, -1
 
 
 @dataclass
@@ -144,6 +185,7 @@ class ContactModel:
         size = scene_size or float(np.ptp(reference, axis=0).max())
         # plane triangles (p, p + s t1, p + s t2), t1, t2 an orthonormal basis of the plane
         self._plane_frames = [self._plane_frame(pl.normal, size) for pl in self.planes]
+        self._plane_normals = np.array([pl.normal for pl in self.planes], float).reshape(-1, 3)
         self._wall_nodes_at = None  # (t, the wall nodes at t): wall_nodes' last answer
         mesh_vertices = [np.asarray(m.vertices, float) for m in self.meshes]
         surf_ptr = np.concatenate([self.vertex_ptr, self.n_vertices + np.cumsum([0] + [len(v) for v in mesh_vertices])[1:]])
@@ -217,36 +259,17 @@ class ContactModel:
         return gap_rates(self.all_positions(x, t), v_all, ints, floats)
 
     def _plane_pairs(self, x_all, t, gbar):
-        ints, floats = [np.zeros((0, INT_COLS), np.int64)], [np.zeros((0, FLOAT_COLS))]
-        flags = np.zeros(self.n_vertices, np.bool_)
-        signed = np.zeros(self.n_vertices)
-        grain_of = self.topology.vertex_grain
-        for w, plane in enumerate(self.planes):
-            if not plane.motion.active(t):
-                continue
-            _plane_candidates(x_all, self.n_vertices, plane.point_at(t), plane.normal, gbar, flags, signed)
-            if (signed <= 0).any():
-                v = int(np.argmin(signed))
-                raise PenetrationError(f"vertex {v} (grain {grain_of[v]}) is behind wall {plane.name!r}")
-            verts = np.flatnonzero(flags)
-            n0 = self.plane_node0 + 3 * w
-            rec = np.full((len(verts), INT_COLS), -1, np.int64)
-            rec[:, KIND] = VERTEX_FACE
-            rec[:, GRAIN_A] = grain_of[verts]
-            rec[:, GRAIN_B] = self.n_grains + len(self.meshes) + w
-            rec[:, FEATURE_A] = verts
-            rec[:, FEATURE_B] = self.plane_face_base + w
-            rec[:, NODE0] = verts
-            rec[:, NODE0 + 1 : NODE0 + 4] = [n0, n0 + 1, n0 + 2]
-            # the plane's triangle has orthogonal legs e1, e2 (_plane_frame), so the closest-point
-            # coordinates are plain projections (what vertex_face_lcp solves for a general triangle)
-            tri = x_all[n0 : n0 + 3]
-            e1, e2 = tri[1] - tri[0], tri[2] - tri[0]
-            r = x_all[verts] - tri[0]
-            fl = np.column_stack([r @ e1 / (e1 @ e1), r @ e2 / (e2 @ e2), signed[verts]])
-            ints.append(rec)
-            floats.append(fl)
-        return np.vstack(ints), np.vstack(floats)
+        active = [w for w, plane in enumerate(self.planes) if plane.motion.active(t)]
+        if not active:
+            return np.zeros((0, INT_COLS), np.int64), np.zeros((0, FLOAT_COLS))
+        w = np.asarray(active, np.int64)
+        ints, floats, bad, v = _plane_records(x_all, self.n_vertices, self.plane_node0 + 3 * w, self._plane_normals[w],
+                                              self.n_grains + len(self.meshes) + w, self.plane_face_base + w,
+                                              self.topology.vertex_grain, gbar)  # fmt: skip
+        if bad >= 0:
+            grain = self.topology.vertex_grain[v]
+            raise PenetrationError(f"vertex {v} (grain {grain}) is behind wall {self.planes[active[bad]].name!r}")
+        return ints, floats
 
     # ------------------------------------------------------------------ forces
     def potential(self, x, t, candidates) -> float:
