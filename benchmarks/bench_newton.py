@@ -1,13 +1,17 @@
 """One implicit Newton iteration, split by piece, against the number of grains (issue 14).
 
     python benchmarks/bench_newton.py [--grains 515,4096] [--dt 1e-4,1e-3] [--state PATH/state.npz]
+                                      [--tile 1x1,2x4,4x8] [--step]
                                       [--run CONFIG.toml:DIR/checkpoint.npz]
                                       [--solvers direct,grain-block] [--repeat 3] [--json PATH]
 
 Packs: bench_dynamics.py's geometric deposits (loose stacks, every grain resting on a point of the
 one below) of N grains of the paper's sand (E = 90 GPa, real density), after 2 ms of implicit
 settling; with --state, also a settled pack written by `vemdem run` (a `pack` scenario's
-state.npz: several contacts per grain). For each pack, Newmark shift and linear solver, the pieces
+state.npz: several contacts per grain), tiled --tile times side by side in a box as many times
+wider and deeper (2x4: 8 copies of a 515-grain pack, 4,120 grains; 4x8: 16,480): settled packs of
+any size in seconds, with fewer contacts per grain only along the seams where two copies meet
+across a former wall (reported as c/grain). For each pack, Newmark shift and linear solver, the pieces
 of one Newton iteration at the same state (best of --repeat, wall seconds on this machine):
 
     element     force + tangent blocks of every grain (vem kernel)
@@ -16,7 +20,9 @@ of one Newton iteration at the same state (best of --repeat, wall seconds on thi
     factor      the linear solver's set-up (block LU + coarse space, or SuperLU)
     solve       the solve to a relative residual 1e-8 (GMRES iterations reported)
 
-and the exponent p of cost ~ N^p between the smallest and the largest pack. A GMRES solve that
+and the exponent p of cost ~ N^p between the smallest and the largest pack of each kind. With
+--step, also one whole implicit step from the pack's state (pair search, Newton to convergence,
+the update's CCD share), with its Newton and Krylov iterations. A GMRES solve that
 does not reach 1e-8 in 200 iterations is reported as krylov -1 (solve nan). Nothing asserts a
 timing; results and their reading: docs/linear-solvers.md.
 """
@@ -36,8 +42,8 @@ from vemdem.contact.walls import box_walls
 from vemdem.io.state import load_state
 from vemdem.model.scene import Scene
 from vemdem.solver.linear import LinearSolveDiverged, NewtonSystem, make_linear_solver
-from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newton_blocks
-from vemdem.solver.state import RunStats, State, StepControl
+from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newmark_step, newton_blocks
+from vemdem.solver.state import RunStats, State, StepControl, StepRejected
 from vemdem.vem.material import Material
 
 BETA, GAMMA = 0.3025, 0.6
@@ -52,16 +58,29 @@ def deposit_case(n: int):
     return f"deposit {n}", scene, state
 
 
-def state_case(path: Path):
+def tiled(grains, x, v, box, centre, nx: int, ny: int):
+    """nx x ny copies of a pack side by side (reference shapes and state moved together), and the
+    box around them: (grains, x, v, box, centre)."""
+    width, depth = box
+    offsets = [np.array([i * width, j * depth, 0.0]) for i in range(nx) for j in range(ny)]
+    grains = [g.translated(o) for o in offsets for g in grains]
+    x = np.vstack([x + o for o in offsets])
+    v = np.vstack([v] * len(offsets))
+    centre = (centre[0] + 0.5 * (nx - 1) * width, centre[1] + 0.5 * (ny - 1) * depth)
+    return grains, x, v, (nx * width, ny * depth), centre
+
+
+def state_case(path: Path, tile: tuple[int, int] = (1, 1)):
     s = load_state(path)
     meta = s.meta
+    grains, x, v, box, centre = tiled(s.grains, s.x, s.v, meta["box"], meta["centre"], *tile)
     size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in s.grains]))
     material = Material(bd.E, bd.NU, bd.DENSITY)
     law, friction = default_contact_laws(size, material.E, material.density, bd.GRAVITY, bd.MU_S, bd.MU_D)
-    walls = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
-    scene = Scene.build(s.grains, material, law, friction, planes=walls)
-    a = np.zeros_like(s.x)
-    return f"settled {len(s.grains)}", scene, State(0.0, s.x.copy(), s.v.copy(), a)
+    walls = box_walls(*box, meta["floor"], tuple(centre))
+    scene = Scene.build(grains, material, law, friction, planes=walls)
+    name = f"settled {len(grains)}" if tile == (1, 1) else f"tiled {len(grains)}"
+    return name, scene, State(0.0, x.copy(), v.copy(), np.zeros_like(x))
 
 
 def run_case(config: Path, checkpoint: Path):
@@ -90,6 +109,17 @@ def best(f, repeat):
         out = f()
         times.append(time.perf_counter() - t)
     return min(times), out
+
+
+def one_step(scene, state, dt, solver_name, repeat):
+    """Wall seconds (best of `repeat`), Newton and Krylov iterations of one implicit step from
+    `state` (nan, -1, -1 when the step is rejected: reported, not fatal)."""
+    params = NewmarkParameters(BETA, GAMMA, linear=make_linear_solver(solver_name))
+    try:
+        wall, (_, info) = best(lambda: newmark_step(scene, state, dt, params), repeat)
+    except StepRejected:
+        return np.nan, -1, -1
+    return wall, info.iterations, info.krylov_iterations
 
 
 def measure(scene, state, dt, solver_name, repeat):
@@ -130,6 +160,8 @@ def main():
     p.add_argument("--grains", default="515,4096")
     p.add_argument("--dt", default="1e-4,1e-3")
     p.add_argument("--state", type=Path, action="append", default=[])
+    p.add_argument("--tile", default="1x1", help="copies of each --state pack side by side, e.g. 1x1,2x4,4x8")
+    p.add_argument("--step", action="store_true", help="also time one whole implicit step")
     p.add_argument("--run", action="append", default=[], metavar="CONFIG.toml:DIR/checkpoint.npz",
                    help="a pack run's config and checkpoint (its state at that time)")
     p.add_argument("--solvers", default="direct,grain-block")
@@ -137,27 +169,37 @@ def main():
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     cases = [deposit_case(int(n)) for n in args.grains.split(",") if n]
-    cases += [state_case(path) for path in args.state]
+    tiles = [tuple(int(k) for k in t.split("x")) for t in args.tile.split(",") if t]
+    cases += [state_case(path, tile) for path in args.state for tile in tiles]
     cases += [run_case(*(Path(part) for part in spec.split(":", 1))) for spec in args.run]
     rows = []
     print(f"{'pack':>14} {'dt':>7} {'solver':>11} {'c/grain':>7} {'element':>8} {'contact':>8} {'assembly':>8} "
-          f"{'factor':>8} {'solve':>8} {'total ms':>9} {'krylov':>6}")  # fmt: skip
+          f"{'factor':>8} {'solve':>8} {'total ms':>9} {'krylov':>6}" + (f" {'step ms':>9} {'newton':>6} {'krylov':>6}"
+          if args.step else ""))  # fmt: skip
     for name, scene, state in cases:
         for dt in (float(d) for d in args.dt.split(",")):
             for solver in args.solvers.split(","):
                 m = measure(scene, state, dt, solver, args.repeat)
+                if args.step:
+                    m["step"], m["newton"], m["step_krylov"] = one_step(scene, state, dt, solver, args.repeat)
                 rows.append({"pack": name, "n_grains": scene.n_grains, "dt": dt, "solver": solver, **m})
                 print(f"{name:>14} {dt:7.0e} {solver:>11} {m['contacts_per_grain']:7.2f} "
                       + " ".join(f"{1e3 * m[k]:8.1f}" for k in ("element", "contact", "assembly", "factor", "solve"))
-                      + f" {1e3 * m['total']:9.1f} {m['krylov']:6d}", flush=True)  # fmt: skip
-    deposits = [r for r in rows if r["pack"].startswith("deposit")]
-    for solver in args.solvers.split(","):
-        for dt in {r["dt"] for r in deposits}:
-            sel = sorted((r for r in deposits if r["solver"] == solver and r["dt"] == dt), key=lambda r: r["n_grains"])
-            if len(sel) >= 2:
-                lo, hi = sel[0], sel[-1]
-                exponent = np.log(hi["total"] / lo["total"]) / np.log(hi["n_grains"] / lo["n_grains"])
-                print(f"cost exponent, {solver}, dt {dt:g}: N^{exponent:.2f} ({lo['n_grains']} -> {hi['n_grains']} grains)")
+                      + f" {1e3 * m['total']:9.1f} {m['krylov']:6d}"
+                      + (f" {1e3 * m['step']:9.1f} {m['newton']:6d} {m['step_krylov']:6d}" if args.step else ""),
+                      flush=True)  # fmt: skip
+    for kind, prefixes in (("deposits", ("deposit",)), ("settled packs", ("settled", "tiled"))):
+        packs = [r for r in rows if r["pack"].startswith(prefixes)]
+        for solver in args.solvers.split(","):
+            for dt in sorted({r["dt"] for r in packs}):
+                sel = sorted((r for r in packs if r["solver"] == solver and r["dt"] == dt), key=lambda r: r["n_grains"])
+                if len(sel) >= 2:
+                    lo, hi = sel[0], sel[-1]
+                    ratio = np.log(hi["n_grains"] / lo["n_grains"])
+                    text = f"N^{np.log(hi['total'] / lo['total']) / ratio:.2f} per Newton iteration"
+                    if args.step and lo["newton"] > 0 and hi["newton"] > 0:
+                        text += f", N^{np.log(hi['step'] / lo['step']) / ratio:.2f} per step"
+                    print(f"cost exponent, {kind}, {solver}, dt {dt:g}: {text} ({lo['n_grains']} -> {hi['n_grains']} grains)")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 
