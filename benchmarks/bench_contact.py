@@ -105,7 +105,7 @@ def bench_friction_tangent(model, x, cand, history, repeat: int):
     found, c_prev, gt_prev, stick_prev = history.lookup(pair_keys(ints))
     v_all = 1e-3 * np.random.default_rng(0).normal(size=x_all.shape)  # some pairs slip
     m = len(ints)
-    common = (x_all, v_all, 1e4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.friction_params,
+    common = (x_all, v_all, 1e4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.pair_friction(ints),
               model.masses_of_pairs(ints))  # fmt: skip
     force, tangent = np.zeros((m, 6, 3)), np.zeros((m, 18, 18))
     stick, gt = np.zeros(m, dtype=np.bool_), np.zeros((m, 3))

@@ -208,8 +208,8 @@ def test_analytic_friction_tangent_is_the_complex_step_derivative(rng):
 
     friction = FrictionLaw(mu_s=0.5, mu_d=0.4, tangential_penalty=EPS_T, tangential_viscosity=3.0,
                            damping_ratio=0.4)  # fmt: skip
-    law, fr = LAW.packed(), friction.packed()
     n_pairs = 400
+    law, fr = LAW.packed(), np.tile(friction.packed(), (n_pairs, 1))
     x = np.zeros((6 * n_pairs, 3))
     ints = np.full((n_pairs, INT_COLS), -1, dtype=np.int64)
     for c in range(n_pairs):
@@ -280,3 +280,39 @@ def test_plane_pairs_match_ipctk_and_the_general_face_lcp():
     deeper = x - 0.3e-3 * planes[1].normal  # past the second wall only
     with pytest.raises(PenetrationError, match="behind wall 'w1'"):
         model.pairs(deeper, 0.0, model.search(deeper, 0.0))
+
+
+def test_a_frictionless_wall_carries_no_tangential_force_and_the_same_normal_one():
+    """A frictionless wall (a mirror plane): on the same sliding path as the stick/slip test its
+    pairs carry the normal force of the frictional floor and no tangential force; a second cube
+    resting on the first still feels the grains' friction."""
+    from vemdem.contact.pairs import GRAIN_B
+
+    c = cube(1e-3).translated((0, 0, 0.5e-3 + GAP))
+    top = cube(1e-3).translated((0, 0, 1.5e-3 + 2 * GAP))
+    vertices = np.vstack([c.vertices, top.vertices])
+
+    def model_with(frictionless):
+        floor = PlaneWall(np.zeros(3), np.array([0.0, 0, 1]), name="floor", frictionless=frictionless)
+        return ContactModel(vertices, [c.faces, top.faces], np.array([0, 8, 16]), np.array([1.0, 1.0]), LAW, FRICTION,
+                            planes=[floor])  # fmt: skip
+
+    step = 1e-7  # far beyond the static limit on the floor: sliding
+    results = {}
+    for frictionless in (False, True):
+        model = model_with(frictionless)
+        history = ContactHistory.empty()
+        for k in range(3):  # the bottom cube slides on the floor under the top one
+            x = vertices + np.r_[np.full(8, k * step), np.zeros(8)][:, None] * [1, 0, 0]
+            res = model.evaluate(x, 0.0, model.search(x, 0.0), history)
+            history = res.trial_history
+        results[frictionless] = res
+    frictional, mirror = results[False], results[True]
+    on_floor = frictional.ints[:, GRAIN_B] == 2
+    assert on_floor.sum() == 4 and (mirror.ints[:, GRAIN_B] == 2).sum() == 4
+    np.testing.assert_allclose(mirror.wall_reactions[0][2], frictional.wall_reactions[0][2], rtol=1e-12)
+    assert abs(frictional.wall_reactions[0][0]) > 0.1 * abs(frictional.wall_reactions[0][2])  # mu_d 0.4 there
+    assert mirror.wall_reactions[0][0] == 0.0 and mirror.wall_reactions[0][1] == 0.0
+    # the grain-grain pairs keep their friction
+    np.testing.assert_allclose(mirror.pair_force[~on_floor], frictional.pair_force[~on_floor], rtol=1e-12)
+    assert np.abs(mirror.pair_force[~on_floor][:, 0]).max() > 0

@@ -261,3 +261,45 @@ def test_channel_plan_needs_its_wall_and_width():
     centroids, _ = synthetic_wedge(30.0, 0)
     with pytest.raises(ValueError, match="channel"):
         angle_of_repose(centroids, D, plan="channel")
+
+
+def quarter_heap(angle_deg, seed, height=FLANK_HEIGHT):
+    """The quadrant x, y >= CENTRE of synthetic_heap: a heap in the corner of two walls."""
+    centroids, base = synthetic_heap(angle_deg, seed, height=height)
+    inside = (centroids[:, 0] >= CENTRE[0]) & (centroids[:, 1] >= CENTRE[1])
+    return centroids[inside], base
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("angle", [20.0, 30.0])
+def test_quarter_heap_in_a_corner_is_measured_from_the_corner(angle, seed):
+    centroids, base = quarter_heap(angle, seed)
+    result = angle_of_repose(centroids, D, centre=CENTRE, plan="corner")
+    assert result.plan == "corner"
+    # a quarter of the cone's surface points: the channel's allowance, not the full cone's
+    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + CHANNEL_TOLERANCE_DEG
+    assert np.isfinite(result.sector_angles_deg).sum() == 2  # the quadrant in two, as wide as a full heap's eight
+    assert result.extent <= base + TOE_WIDTH + D
+
+
+def test_quarter_heaps_keep_their_order():
+    mean = [np.mean([angle_of_repose(quarter_heap(a, s)[0], D, centre=CENTRE, plan="corner").angle_deg
+                     for s in range(8)]) for a in (15, 25, 35)]  # fmt: skip
+    assert mean == sorted(mean)
+    assert mean[2] - mean[0] > 12.0
+
+
+def test_a_quarter_heap_read_around_its_centroid_is_not_its_angle():
+    centroids, _ = quarter_heap(30.0, 0)
+    in_corner = angle_of_repose(centroids, D, centre=CENTRE, plan="corner")
+    try:
+        around = angle_of_repose(centroids, D).angle_deg
+    except ValueError:
+        around = 0.0
+    assert abs(in_corner.angle_deg - 30.0) < abs(around - 30.0)
+
+
+def test_corner_plan_needs_its_corner():
+    centroids, _ = quarter_heap(30.0, 0)
+    with pytest.raises(ValueError, match="corner"):
+        angle_of_repose(centroids, D, plan="corner")

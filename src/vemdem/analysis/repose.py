@@ -50,6 +50,12 @@ box's +x wall was removed, the grains spread along x between the side walls): th
 x - centre[0] (centre[0] is the back wall), the surface cells are the ring's `width` cut into
 pieces of about two footprints, and the sectors are those strips along the channel.
 
+`plan="corner"` measures a quarter heap in the corner of two walls (only the box's +x and +y
+walls were removed): the distance is Euclidean from the corner (centre), the rings are quarter
+rings, and the quadrant is cut into n_sectors / 4 sectors (the full heap's sector width). With
+frictionless walls it is a quarter of the heap four times the column would leave (the walls are
+its mirror planes); with frictional ones the grains along them lean on the walls (docs/repose.md).
+
 Pile height is the highest grain top above the floor. The heap's extent is the largest horizontal
 (Euclidean) distance of a grain centroid from the axis; its runout (one definition everywhere,
 `runout`) is that extent beyond the column's half width, 0 for a pile that did not spread.
@@ -65,7 +71,7 @@ from typing import Literal
 
 import numpy as np
 
-Plan = Literal["round", "square", "auto", "channel"]
+Plan = Literal["round", "square", "auto", "channel", "corner"]
 
 MIN_FIT_POINTS = 3
 CELL_FOOTPRINTS = 2.0  # surface cell area in grain_size^2
@@ -76,7 +82,8 @@ FLOOR_CONTACT = 0.1  # a grain whose lowest point is this close to the floor (gr
 LAYER_PERCENTILE = 95.0
 
 # Perimeter of the level set at unit distance: the area of a ring is this times its mid-radius.
-_LEVEL_SET_PERIMETER = {"round": 2 * math.pi, "square": 8.0}
+_LEVEL_SET_PERIMETER = {"round": 2 * math.pi, "square": 8.0, "corner": 0.5 * math.pi}
+_ORIGIN = {"channel": "back wall", "corner": "corner"}  # what the side views measure distances from
 
 
 # eq=False: the array fields make element-wise == ambiguous, so compare by identity.
@@ -164,7 +171,7 @@ def plan_distance(xy: np.ndarray, centre: tuple[float, float], plan: str) -> np.
         return xy[:, 0] - centre[0]
     dx = np.abs(xy[:, 0] - centre[0])
     dy = np.abs(xy[:, 1] - centre[1])
-    return np.hypot(dx, dy) if plan == "round" else np.maximum(dx, dy)
+    return np.maximum(dx, dy) if plan == "square" else np.hypot(dx, dy)
 
 
 def _turns(xy: np.ndarray, centre: tuple[float, float], plan: str, width: float) -> np.ndarray:
@@ -173,6 +180,8 @@ def _turns(xy: np.ndarray, centre: tuple[float, float], plan: str, width: float)
     if plan == "channel":
         return np.clip((xy[:, 1] - centre[1]) / width + 0.5, 0.0, np.nextafter(1.0, 0.0))
     azimuth = np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0])
+    if plan == "corner":  # the quadrant x, y > centre
+        return np.clip(azimuth / (0.5 * math.pi), 0.0, np.nextafter(1.0, 0.0))
     return np.mod(azimuth, 2 * math.pi) / (2 * math.pi)
 
 
@@ -315,6 +324,8 @@ def _measure(
     used, line = _flank(r, h, grain_size, toe, crest, layer_top)
     if plan == "channel":  # the strips along the channel: one per surface cell across it
         n_sectors = int(_cells(np.array([width / grain_size]))[0])
+    elif plan == "corner":  # sectors as wide as the full heap's
+        n_sectors = max(2, n_sectors // 4)
     sector = np.floor(turn[chosen] * n_sectors).astype(np.int64)
     sector_angles = _sector_angles(r[used], h[used], sector[used], n_sectors)
     sector_se = _standard_error(sector_angles)
@@ -366,17 +377,20 @@ def angle_of_repose(
     top is its centroid + grain_size / 2. centre defaults to the grains' horizontal
     centroid. toe and crest bound the flank in grain sizes (above the floor, below the
     highest top). plan="channel" needs centre = (x of the back wall, y of the channel's axis)
-    and the channel's width. Raises ValueError when the heap has no flank to fit.
+    and the channel's width; plan="corner" the corner (the heap lies at x, y > centre). Raises
+    ValueError when the heap has no flank to fit.
     """
     centroids = np.asarray(centroids, dtype=float)
     if centroids.ndim != 2 or centroids.shape[1] != 3 or len(centroids) == 0:
         raise ValueError(f"centroids must be a non-empty (G, 3) array, got shape {centroids.shape}")
     if not grain_size > 0:
         raise ValueError(f"grain_size must be > 0, got {grain_size}")
-    if plan not in ("round", "square", "auto", "channel"):
-        raise ValueError(f"plan must be 'round', 'square', 'auto' or 'channel', got {plan!r}")
+    if plan not in ("round", "square", "auto", "channel", "corner"):
+        raise ValueError(f"plan must be 'round', 'square', 'auto', 'channel' or 'corner', got {plan!r}")
     if plan == "channel" and (centre is None or width is None or not width > 0):
         raise ValueError("plan 'channel' needs the back wall and axis as centre and the channel's width > 0")
+    if plan == "corner" and centre is None:
+        raise ValueError("plan 'corner' needs the corner as centre")
     bottoms, tops = grain_heights(centroids, grain_size, vertices, vertex_grain)
     layer_top = floor_layer_top(bottoms, tops, grain_size, floor)
     cx, cy = centroids[:, :2].mean(axis=0) if centre is None else centre
@@ -401,27 +415,33 @@ def runout(extent: float, half_width: float) -> float:
     return extent - half_width
 
 
-def pile_axis(meta: dict, channel: bool = False):
-    """(centre, plan, column, across) of a pile from its pack's box: the box axis and "auto" with the
-    column's half width, or for a channel its back wall ("channel") with the box's width as the
-    column and its depth across; distances in the plots and figures are taken from `centre`."""
+def pile_axis(meta: dict, opened: str = "all"):
+    """(centre, plan, column, across) of a pile from its pack's box and the walls removed (`opened`,
+    `[collapse] open`): all four, the box axis and "auto" with the column's half width; "front",
+    the channel's back wall ("channel") with the box's width as the column and its depth across;
+    "corner", the corner of the two standing walls ("corner") with the box's width as the column
+    (the half width of the column four times as large that the walls mirror). Distances in the
+    plots and figures are taken from `centre`."""
     width, depth = meta["box"]
     cx, cy = meta.get("centre", (0.0, 0.0))
-    if channel:
+    if opened == "front":
         return (cx - 0.5 * width, cy), "channel", width, depth
+    if opened == "corner":
+        return (cx - 0.5 * width, cy - 0.5 * depth), "corner", min(width, depth), None
     return (cx, cy), "auto", 0.5 * min(width, depth), None
 
 
 def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray, grain_size: float, meta: dict,
-                 channel: bool = False):  # fmt: skip
+                 opened: str = "all"):  # fmt: skip
     """(ReposeResult or None, summary figures) of a settled pile at vertex positions x.
     pile_height: highest grain top above the floor; runout: largest horizontal distance of a grain
     centroid from the box axis minus the box's half width (0 for a pile that did not spread); both
     also for a heap too flat for an angle, which gets angle_of_repose_deg = None and the reason.
-    channel: only the box's +x wall was removed (`plan="channel"`): distances from the back wall,
+    opened: the walls removed (pile_axis): "front" (`plan="channel"`) measures distances from the
+    back wall and the runout beyond the box's width, "corner" from the corner of the standing walls
     and the runout beyond the box's width."""
     floor = meta.get("floor", 0.0)
-    centre, plan, column, across = pile_axis(meta, channel)
+    centre, plan, column, across = pile_axis(meta, opened)
     extent = _extent(centroids[:, :2], centre, plan)
     figures = {"pile_height": float(x[:, 2].max() - floor), "runout": runout(extent, column)}
     try:
@@ -481,7 +501,7 @@ def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: st
         label=f"fit: {result.angle_deg:.1f}° ± {result.uncertainty_deg:.1f}°",
     )
     distance_name = {"round": "distance from the axis", "square": "max(|dx|, |dy|) from the axis",
-                     "channel": "distance from the back wall"}[result.plan]  # fmt: skip
+                     "channel": "distance from the back wall", "corner": "distance from the corner"}[result.plan]  # fmt: skip
     ax.set_xlabel(f"{distance_name} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     ax.set_title(f"{title}: angle of repose" if title else "angle of repose")
@@ -491,17 +511,17 @@ def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: st
 def plot_heap(centroids: np.ndarray, centre: tuple[float, float], path: Path, title: str = "", note: str = "",
               plan: str = "round") -> None:  # fmt: skip
     """Side view of a heap without a fitted flank (too flat or too small to measure): every
-    centroid at (distance from the axis, or from a channel's back wall, height), with `note`
-    saying why there is no fit."""
+    centroid at (distance from the axis, from a channel's back wall or from the corner, height),
+    with `note` saying why there is no fit."""
     from .plots import plt  # the package's Agg backend
 
     mm = 1e3
     centroids = np.asarray(centroids, dtype=float)
-    distance = plan_distance(centroids[:, :2], centre, plan if plan == "channel" else "round")
+    distance = plan_distance(centroids[:, :2], centre, plan if plan in ("channel", "corner") else "round")
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     ax.axhline(0.0, color="k", lw=0.8)
     ax.scatter(distance * mm, centroids[:, 2] * mm, s=10, c="0.4", label="grain centroids")
-    ax.set_xlabel(f"distance from the {'back wall' if plan == 'channel' else 'axis'} (mm)")
+    ax.set_xlabel(f"distance from the {_ORIGIN.get(plan, 'axis')} (mm)")
     ax.set_ylabel("height above the floor (mm)")
     # the note goes under the title: inside the axes it covered a flat heap's thin plot
     ax.set_title((title or "heap") + ("\n" + textwrap.fill(note, 90) if note else ""), fontsize=9 if note else None)

@@ -271,11 +271,14 @@ PILE_COLLAPSE = {
     "initial_state": INITIAL_STATE,
     "pack": pack_stage(),
     "collapse": {
-        "open": Field(("all", "front"), "all",
+        "open": Field(("all", "front", "corner"), "all",
                       doc="which walls go at t = 0: all (the paper's experiment: the column spreads around its axis "
-                          "into a heap) or front (only the +x wall: the grains run out along the channel of the "
+                          "into a heap), front (only the +x wall: the grains run out along the channel of the "
                           "back and side walls, a two-dimensional collapse whose deposit leans on the back wall; "
-                          "a flank as tall from about a third of the grains a cone needs)"),
+                          "a flank as tall from about a third of the grains a cone needs) or corner (the +x and +y "
+                          "walls: the -x and -y walls stay, frictionless, as mirror planes, and the grains spread "
+                          "into a quarter of the heap of a column four times as large: a flank as tall from a "
+                          "quarter of the grains)"),
     },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }

@@ -167,7 +167,7 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
 def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, stick_out,
                 gt_out):  # fmt: skip
     """dissipative_force of pair c into row c of the outputs; returns its gathered node positions
-    and velocities."""
+    and velocities. fr: (m, 5) friction parameters per pair (ContactModel.pair_friction)."""
     kind = ints[c, KIND]
     xs = np.zeros((6, 3))
     vs = np.zeros((6, 3))
@@ -177,7 +177,7 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
             vs[i, a] = v[ints[c, NODE0 + i], a]
     out = np.zeros((6, 3))
     stick, store = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                                     law, fr, m_eq[c], out)  # fmt: skip
+                                     law, fr[c], m_eq[c], out)  # fmt: skip
     stick_out[c] = stick
     # element loops, not slice assignments: numba compiles those with a string-formatting error
     # path, seconds of a fresh install's first run
@@ -208,8 +208,8 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
     for c in prange(len(ints)):
         xs, vs = _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                              stick_out, gt_out)  # fmt: skip
-        dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr,
-                            m_eq[c], local_tangent[c])  # fmt: skip
+        dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
+                            fr[c], m_eq[c], local_tangent[c])  # fmt: skip
 
 
 @njit(cache=True)
@@ -364,6 +364,6 @@ def complex_step_tangent(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick,
                     xc[i, a] = xs[i, a]
             xc[j // 3, j % 3] += 1j * h
             dissipative_force(kind, xc, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                              law, fr, m_eq[c], outc)  # fmt: skip
+                              law, fr[c], m_eq[c], outc)  # fmt: skip
             for r in range(3 * nn):
                 local_tangent[c, r, j] = outc[r // 3, r % 3].imag / h

@@ -29,7 +29,7 @@ from .forces import (
     scatter_local_forces,
     scatter_pair_tangents,
 )
-from .friction import FrictionLaw, dissipative_forces, dissipative_terms
+from .friction import MU_D, MU_S, FrictionLaw, dissipative_forces, dissipative_terms
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE
 from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
@@ -176,6 +176,9 @@ class ContactModel:
         self.law_params = law.packed()
         self.friction = friction
         self.friction_params = friction.packed()
+        walls = list(meshes) + list(planes)  # the order of their body indices after the grains
+        frictionless = np.array([w.frictionless for w in walls], bool)
+        self._frictionless_body = frictionless if frictionless.any() else None
         self.planes: list[PlaneWall] = list(planes)
         self.meshes: list[MeshWall] = list(meshes)
         self.n_grains = len(vertex_ptr) - 1
@@ -339,6 +342,20 @@ class ContactModel:
             start += 3
         return -np.array(out).reshape(-1, 3)
 
+    def pair_friction(self, ints) -> np.ndarray:
+        """(m, 5) friction parameters of every pair (FrictionLaw.packed): the law's, with mu_s = mu_d = 0
+        on the pairs of a frictionless wall."""
+        fr = np.tile(self.friction_params, (len(ints), 1))
+        if self._frictionless_body is not None and len(ints):
+            G = self.n_grains
+            slip = np.zeros(len(ints), bool)
+            for side in (GRAIN_A, GRAIN_B):  # a mesh wall may be either side of a pair
+                body = ints[:, side]
+                wall = body >= G
+                slip[wall] |= self._frictionless_body[body[wall] - G]
+            fr[slip, MU_S] = fr[slip, MU_D] = 0.0
+        return fr
+
     def masses_of_pairs(self, ints):
         """m_eq = m_A m_B / (m_A + m_B); a wall counts as infinitely heavy (m_eq = m_grain). A
         triangulated wall may be either side of a pair (its vertex on a grain's face: side A)."""
@@ -351,7 +368,7 @@ class ContactModel:
 
 def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
                  local_force, local_tangent, stick_now, gt_now):  # fmt: skip
-    common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.friction_params,
+    common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.pair_friction(ints),
               model.masses_of_pairs(ints), local_force)  # fmt: skip
     if tangent:
         dissipative_terms(*common, local_tangent, stick_now, gt_now)

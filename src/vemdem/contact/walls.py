@@ -70,6 +70,10 @@ class PlaneWall:
     normal: np.ndarray  # points towards the grains
     motion: Motion = field(default_factory=Motion)
     name: str = "plane"
+    # A frictionless wall (mu_s = mu_d = 0 on its pairs, the normal law and damping unchanged) is a
+    # mirror plane: the grains next to it move as if their mirror images were there (a corner
+    # collapse is a quarter of the heap four times its size, docs/repose.md).
+    frictionless: bool = False
 
     def __post_init__(self):
         n = np.asarray(self.normal, float)
@@ -90,6 +94,7 @@ class MeshWall:
     faces: np.ndarray
     motion: Motion = field(default_factory=Motion)
     name: str = "mesh"
+    frictionless: bool = False  # as for PlaneWall
 
     def vertices_at(self, t: float) -> np.ndarray:
         return np.asarray(self.vertices, float) + self.motion.displacement(t)

@@ -1,6 +1,8 @@
 """`scenario = "pile_collapse"`: a settled pack loses its four walls and spreads on the floor,
 or (`[collapse] open = "front"`) loses only its +x wall and runs out along the channel the others
-form, leaving a wedge on the back wall (a two-dimensional collapse).
+form, leaving a wedge on the back wall (a two-dimensional collapse), or (`open = "corner"`) loses
+its +x and +y walls and spreads into the quadrant of the other two, which stay as frictionless
+mirror planes: a quarter of the heap that a column four times as large leaves.
 
 Starts from a `pack` state file (`initial_state = "path/state.npz"`, relative to the config file)
 or settles the `[pack]` table first, and runs until the pile is at rest (settle table) or
@@ -15,6 +17,7 @@ pile.png (side view with the fitted slope), pile_3d.png (3D view), state.npz (th
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from ..analysis.plots import plot_grains_3d
@@ -35,10 +38,16 @@ RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.PILE_COLLAPSE
 
 
-def standing_walls(meta: dict, channel: bool) -> list:
-    """The walls left at t = 0: the floor, and for a channel the back (-x) and side walls too."""
-    floor, back, _front, *sides = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
-    return [floor, back, *sides] if channel else [floor]
+def standing_walls(meta: dict, opened: str) -> list:
+    """The walls left at t = 0: the floor; for a channel ("front") the back (-x) and side walls too;
+    for a corner the -x and -y walls, frictionless (mirror planes: the grains along them move as
+    if their mirror images were there)."""
+    floor, back, _front, side_lo, side_hi = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
+    if opened == "front":
+        return [floor, back, side_lo, side_hi]
+    if opened == "corner":
+        return [floor, replace(back, frictionless=True), replace(side_lo, frictionless=True)]
+    return [floor]
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
@@ -46,8 +55,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = initial.meta
-    channel = cfg["collapse"]["open"] == "front"
-    scene = scene_from(initial.grains, cfg, standing_walls(meta, channel))
+    opened = cfg["collapse"]["open"]
+    scene = scene_from(initial.grains, cfg, standing_walls(meta, opened))
     integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
@@ -58,13 +67,13 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     state = result.state
     centroids = scene.grain_centroids(state.x)
     repose, figures = measure_pile(centroids, state.x, scene.contact.topology.vertex_grain[: scene.n_vertices],
-                                   scene.grain_size, meta, channel)  # fmt: skip
+                                   scene.grain_size, meta, opened)  # fmt: skip
     friction = scene.contact.friction
     title = f"{scene.n_grains} grains, mu_s = {friction.mu_s:g}, mu_d = {friction.mu_d:g}"
     if repose is not None:
         plot_pile(repose, centroids, out_dir / "pile.png", title=title)
     else:
-        centre, plan, _, _ = pile_axis(meta, channel)
+        centre, plan, _, _ = pile_axis(meta, opened)
         plot_heap(centroids, centre, out_dir / "pile.png", title,
                   note=f"no angle of repose: {figures['angle_of_repose_error']}", plan=plan)  # fmt: skip
     plot_grains_3d(out_dir / "pile_3d.png", state.x, *scene.surface_triangles(), title=f"the heap: {title}",
