@@ -189,7 +189,7 @@ def test_missing_state_file_is_named(tmp_path):
         module.run(cfg, tmp_path)
 
 
-@pytest.mark.parametrize("name", [n for n in EXAMPLES if n.startswith("paper-") or n == "pile"])
+@pytest.mark.parametrize("name", [n for n in EXAMPLES if n.startswith(("paper-", "pile"))])
 def test_paper_examples_are_valid_configs(name):
     import tomllib
 

@@ -22,6 +22,7 @@ EXAMPLES = {
     "grain_compression": "grain_compression.toml",
     "drop": "drop.toml",
     "pile": "pile.toml",
+    "pile-flexible": "pile-flexible.toml",
     "paper-pack": "paper-pack.toml",
     "paper-collapse-high": "paper-collapse-high.toml",
     "paper-collapse-mid": "paper-collapse-mid.toml",
