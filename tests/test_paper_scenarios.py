@@ -92,45 +92,42 @@ def test_pile_collapse_spreads_further_with_less_friction(tmp_path, settled):
     assert shape["low"][1] > 1.05 * shape["high"][1]  # measured 13-15 % wider
 
 
+def collapse_opened(tmp_path, settled, opened):
+    """The settled pack collapsed at mu 0.3/0.2 with `[collapse] open = opened`: (summary, final
+    state, grain centroids, output folder)."""
+    pack_dir, _ = settled
+    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(pack_dir / "state.npz"),
+                         "collapse": {"open": opened}, "contact": {"mu_s": 0.3, "mu_d": 0.2},
+                         "settle": {"max_time": 0.2}, "output": {"vtk": False}})  # fmt: skip
+    out = tmp_path / opened
+    summary = module.run(cfg, out)
+    final = load_state(out / "state.npz")
+    ptr = np.cumsum([0] + [g.n_vertices for g in final.grains])
+    c = np.array([final.x[a:b].mean(axis=0) for a, b in zip(ptr[:-1], ptr[1:])])
+    assert summary["collapse_open"] == opened
+    assert (out / "pile.png").stat().st_size > 10_000
+    return summary, final, c, out
+
+
 def test_channel_collapse_runs_out_through_the_front_only(tmp_path, settled):
     """`[collapse] open = "front"`: the back and side walls stay, so every grain stays behind the back
     wall and between the side walls (a vertex a contact gap outside at most), grains leave through
     the open +x side, and the runout is measured from the back wall beyond the box's width."""
-    pack_dir, _ = settled
-    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(pack_dir / "state.npz"),
-                         "collapse": {"open": "front"}, "contact": {"mu_s": 0.3, "mu_d": 0.2},
-                         "settle": {"max_time": 0.2}, "output": {"vtk": False}})  # fmt: skip
-    out = tmp_path / "channel"
-    summary = module.run(cfg, out)
-    final = load_state(out / "state.npz")
-    half = 0.5 * BOX
-    slack = 1e-2 * BOX
+    summary, final, c, _ = collapse_opened(tmp_path, settled, "front")
+    half, slack = 0.5 * BOX, 1e-2 * BOX
     assert final.x[:, 0].min() > -half - slack
     assert np.abs(final.x[:, 1]).max() < half + slack
-    ptr = np.cumsum([0] + [g.n_vertices for g in final.grains])
-    c = np.array([final.x[a:b].mean(axis=0) for a, b in zip(ptr[:-1], ptr[1:])])
     assert c[:, 0].max() > half  # out through the front
-    assert summary["collapse_open"] == "front"
     assert summary["runout"] == pytest.approx(c[:, 0].max() + half - BOX, abs=0.02 * BOX)
-    assert (out / "pile.png").stat().st_size > 10_000
 
 
 def test_corner_collapse_spreads_into_its_quadrant_along_frictionless_walls(tmp_path, settled):
     """`[collapse] open = "corner"`: the -x and -y walls stay as frictionless mirror planes, so every
     grain stays in their quadrant (a vertex a contact gap outside at most), grains leave through
     both open sides, the walls take no tangential force, and distances are measured from the corner."""
-    pack_dir, _ = settled
-    cfg, module = small({"scenario": "pile_collapse", "initial_state": str(pack_dir / "state.npz"),
-                         "collapse": {"open": "corner"}, "contact": {"mu_s": 0.3, "mu_d": 0.2},
-                         "settle": {"max_time": 0.2}, "output": {"vtk": False}})  # fmt: skip
-    out = tmp_path / "corner"
-    summary = module.run(cfg, out)
-    final = load_state(out / "state.npz")
-    half = 0.5 * BOX
-    slack = 1e-2 * BOX
+    summary, final, c, out = collapse_opened(tmp_path, settled, "corner")
+    half, slack = 0.5 * BOX, 1e-2 * BOX
     assert final.x[:, 0].min() > -half - slack and final.x[:, 1].min() > -half - slack
-    ptr = np.cumsum([0] + [g.n_vertices for g in final.grains])
-    c = np.array([final.x[a:b].mean(axis=0) for a, b in zip(ptr[:-1], ptr[1:])])
     assert c[:, 0].max() > half and c[:, 1].max() > half  # out through both open sides
     walls = np.genfromtxt(out / "walls.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
     force = np.column_stack([walls["fx"], walls["fy"], walls["fz"]])
@@ -140,9 +137,8 @@ def test_corner_collapse_spreads_into_its_quadrant_along_frictionless_walls(tmp_
         assert along.max() > 0  # the grains lean on it
         across = np.abs(np.delete(force[mine], normal, axis=1))
         assert across.max() <= 1e-9 * along.max()  # frictionless: no tangential force
-    assert summary["collapse_open"] == "corner"
     assert summary["runout"] == pytest.approx(np.hypot(c[:, 0] + half, c[:, 1] + half).max() - BOX, abs=0.02 * BOX)
-    assert (out / "pile.png").stat().st_size > 10_000
+
 
 def test_lid_compression_cycle(tmp_path, settled):
     pack_dir, _ = settled

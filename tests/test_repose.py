@@ -237,32 +237,6 @@ def test_wedge_in_a_channel_is_measured_from_the_back_wall(angle, seed):
     assert result.extent <= base + TOE_WIDTH
 
 
-def test_wedges_in_a_channel_keep_their_order():
-    """Averaged over seeds, since one narrow wedge scatters by several degrees."""
-    mean = [np.mean([angle_of_repose(synthetic_wedge(a, s)[0], D, centre=BACK, plan="channel",
-                                     width=CHANNEL).angle_deg for s in range(8)]) for a in (15, 25, 35)]  # fmt: skip
-    assert mean == sorted(mean)
-    assert mean[2] - mean[0] > 12.0
-
-
-def test_a_wedge_read_around_a_vertical_axis_is_not_its_angle():
-    """The channel plan is what finds the wedge's slope: read as a cone around its middle the same
-    grains give no line at the wedge's angle."""
-    centroids, _ = synthetic_wedge(30.0, 0)
-    as_channel = angle_of_repose(centroids, D, centre=BACK, plan="channel", width=CHANNEL)
-    try:
-        as_cone = angle_of_repose(centroids, D).angle_deg
-    except ValueError:
-        as_cone = 0.0
-    assert abs(as_channel.angle_deg - 30.0) < abs(as_cone - 30.0)
-
-
-def test_channel_plan_needs_its_wall_and_width():
-    centroids, _ = synthetic_wedge(30.0, 0)
-    with pytest.raises(ValueError, match="channel"):
-        angle_of_repose(centroids, D, plan="channel")
-
-
 def quarter_heap(angle_deg, seed, height=FLANK_HEIGHT):
     """The quadrant x, y >= CENTRE of synthetic_heap: a heap in the corner of two walls."""
     centroids, base = synthetic_heap(angle_deg, seed, height=height)
@@ -282,24 +256,38 @@ def test_quarter_heap_in_a_corner_is_measured_from_the_corner(angle, seed):
     assert result.extent <= base + TOE_WIDTH + D
 
 
-def test_quarter_heaps_keep_their_order():
-    mean = [np.mean([angle_of_repose(quarter_heap(a, s)[0], D, centre=CENTRE, plan="corner").angle_deg
-                     for s in range(8)]) for a in (15, 25, 35)]  # fmt: skip
+# the heaps against walls and how each is measured
+WALLED = {
+    "wedge": (lambda a, seed: synthetic_wedge(a, seed)[0], {"centre": BACK, "plan": "channel", "width": CHANNEL}),
+    "quarter": (lambda a, seed: quarter_heap(a, seed)[0], {"centre": CENTRE, "plan": "corner"}),
+}
+
+
+@pytest.mark.parametrize("shape", WALLED)
+def test_heaps_against_walls_keep_their_order(shape):
+    """Averaged over seeds, since one narrow wedge or quarter heap scatters by several degrees."""
+    build, plan = WALLED[shape]
+    mean = [np.mean([angle_of_repose(build(a, s), D, **plan).angle_deg for s in range(8)]) for a in (15, 25, 35)]
     assert mean == sorted(mean)
     assert mean[2] - mean[0] > 12.0
 
 
-def test_a_quarter_heap_read_around_its_centroid_is_not_its_angle():
-    centroids, _ = quarter_heap(30.0, 0)
-    in_corner = angle_of_repose(centroids, D, centre=CENTRE, plan="corner")
+@pytest.mark.parametrize("shape", WALLED)
+def test_a_heap_read_around_a_vertical_axis_is_not_its_angle(shape):
+    """The channel and corner plans are what find these heaps' slopes: read as a cone around their
+    centroid the same grains give no line at their angle."""
+    build, plan = WALLED[shape]
+    centroids = build(30.0, 0)
+    measured = angle_of_repose(centroids, D, **plan)
     try:
-        around = angle_of_repose(centroids, D).angle_deg
+        as_cone = angle_of_repose(centroids, D).angle_deg
     except ValueError:
-        around = 0.0
-    assert abs(in_corner.angle_deg - 30.0) < abs(around - 30.0)
+        as_cone = 0.0
+    assert abs(measured.angle_deg - 30.0) < abs(as_cone - 30.0)
 
 
-def test_corner_plan_needs_its_corner():
-    centroids, _ = quarter_heap(30.0, 0)
-    with pytest.raises(ValueError, match="corner"):
-        angle_of_repose(centroids, D, plan="corner")
+@pytest.mark.parametrize("shape", WALLED)
+def test_walled_plans_need_their_walls(shape):
+    build, plan = WALLED[shape]
+    with pytest.raises(ValueError, match=plan["plan"]):
+        angle_of_repose(build(30.0, 0), D, plan=plan["plan"])
