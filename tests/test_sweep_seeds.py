@@ -87,3 +87,22 @@ def test_running_cases_report_progress(tmp_path):
     _progress_file(tmp_path / cases[1].name)(12, 40, "t = 0.06 s")
     _progress_file(tmp_path / cases[2].name)(40, 40, "done")
     assert running_line(tmp_path, cases, done={2}) == "001: 12/40 t = 0.06 s"
+
+
+def test_the_seed_of_a_scenario_with_a_pack_stage_is_the_packs():
+    """`--set seed=...` on a config that settles a pack first (the README's pile) seeds its [pack];
+    one that starts from a saved state has no pack to seed, and says so."""
+    import tomllib
+
+    from vemdem.config import ConfigError
+    from vemdem.scenarios.registry import example_text
+    from vemdem.sweep import plan_cases
+
+    pile = tomllib.loads(example_text("pile"))
+    cases = plan_cases(pile, ["seed=3,4"], zipped=False)
+    assert [c.raw["pack"]["seed"] for c in cases] == [3, 4]
+    assert "seed" not in cases[0].raw and [c.params["seed"] for c in cases] == [3, 4]
+    pack = tomllib.loads(example_text("paper-pack"))  # its seed is at the top
+    assert [c.raw["seed"] for c in plan_cases(pack, ["seed=5"], zipped=False)] == [5]
+    with pytest.raises(ConfigError, match="initial_state"):
+        plan_cases(tomllib.loads(example_text("paper-collapse-high")), ["seed=1,2"], zipped=False)

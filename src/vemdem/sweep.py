@@ -28,7 +28,7 @@ import numpy as np
 from .config import ConfigError
 from .config.build import resolve_path
 from .analysis.seeds import seed_statistics, varies
-from .scenarios.registry import checked_config
+from .scenarios.registry import checked_config, scenario_module
 
 Scalar = bool | int | float | str
 
@@ -136,9 +136,27 @@ def _slot(node: Any, part: str, key: str) -> tuple[dict | list, str | int]:
     raise ConfigError(f"--set {key}: {part!r} is below a value, not a table")
 
 
+def seed_key(base: dict) -> str:
+    """Where the config keeps the seed that `--set seed=...` sweeps: at the top (pack, scene) or in
+    [pack] (the scenarios that settle a pack first). A config that starts from `initial_state` has
+    no pack to seed: every seed would run the same case."""
+    try:
+        schema = scenario_module(base.get("scenario")).SCHEMA
+    except ConfigError:
+        return SEED  # the case check names the unknown scenario
+    if SEED in schema or "seed" not in schema.get("pack", {}):
+        return SEED
+    if base.get("initial_state"):
+        raise ConfigError("--set seed: this config starts from initial_state, so there is no pack for the seed to "
+                          "make (every seed would run the same case); sweep the seed of the pack's config")  # fmt: skip
+    return "pack.seed"
+
+
 def with_values(base: dict, params: dict[str, Scalar]) -> dict:
     raw = copy.deepcopy(base)
     for key, value in params.items():
+        if key == SEED:
+            key = seed_key(base)
         *parents, last = key.split(".")
         node: Any = raw
         for part in parents:
