@@ -164,3 +164,15 @@ def test_rejected_steps_are_counted_by_cause():
     stats.reject(StepRejected("vertex 3 (grain 0) is behind wall 'floor'"))
     assert stats.rejected == 4
     assert stats.rejections == {"newton": 2, "energy": 1, "behind_wall": 1}
+
+
+def test_a_config_wall_can_be_frictionless(tmp_path):
+    """`[[walls]] frictionless = true` reaches the wall: its pairs get no friction, the others keep it."""
+    from vemdem.config.build import build_walls
+
+    raw = tomllib.loads(example_text("drop"))
+    raw["walls"] = [{"type": "plane", "name": "mirror", "frictionless": True}, {"type": "plane", "point": [0, 0, 1.0],
+                    "normal": [0, 0, -1.0], "name": "lid"}]  # fmt: skip
+    cfg, _ = checked_config(raw)
+    planes, _ = build_walls(cfg["walls"])
+    assert [p.frictionless for p in planes] == [True, False]

@@ -92,7 +92,8 @@ def build_walls(specs: list, base_dir=None):
         if spec["type"] == "plane":
             if np.linalg.norm(spec["normal"]) == 0:
                 raise ConfigError(f"{where}.normal: must not be the zero vector")
-            planes.append(PlaneWall(np.array(spec["point"], float), np.array(spec["normal"], float), motion, name))
+            planes.append(PlaneWall(np.array(spec["point"], float), np.array(spec["normal"], float), motion, name,
+                                    frictionless=spec["frictionless"]))  # fmt: skip
             continue
         if not spec["file"]:
             raise ConfigError(f"{where}.file: required for a mesh wall")
@@ -100,7 +101,7 @@ def build_walls(specs: list, base_dir=None):
             wall = load_mesh_wall(resolve_path(spec["file"], base_dir), motion, flip=spec["flip"])
         except (GeometryError, ValueError) as exc:
             raise ConfigError(f"{where}.file: {exc}") from None
-        meshes.append(replace(wall, name=spec["name"] or wall.name))
+        meshes.append(replace(wall, name=spec["name"] or wall.name, frictionless=spec["frictionless"]))
     return planes, meshes
 
 

@@ -97,6 +97,7 @@ WALL = {
     "file": Field(str, "", doc="mesh: surface file (STL/OBJ/PLY), relative to the config file"),
     "flip": Field(bool, False, doc="mesh: reverse the faces (normals must face the grains)"),
     "name": Field(str, "", doc="label in outputs"),
+    "frictionless": Field(bool, False, doc="no friction on this wall's pairs (a mirror plane; docs/contact.md)"),
     "removed_at": Field(float, None, non_negative, "time at which the wall disappears (s)"),
     "times": Field(list, [0.0], doc="times of the piecewise-linear displacement history (s)"),
     "displacements": Field(list, [[0.0, 0.0, 0.0]], doc="rigid displacement at each time (m)"),
