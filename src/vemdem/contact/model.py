@@ -176,11 +176,11 @@ class ContactModel:
         self.law_params = law.packed()
         self.friction = friction
         self.friction_params = friction.packed()
-        walls = list(meshes) + list(planes)  # the order of their body indices after the grains
-        frictionless = np.array([w.frictionless for w in walls], bool)
-        self._frictionless_body = frictionless if frictionless.any() else None
         self.planes: list[PlaneWall] = list(planes)
         self.meshes: list[MeshWall] = list(meshes)
+        # per wall body (meshes, then planes: their body indices after the grains)
+        frictionless = np.array([w.frictionless for w in self.meshes + self.planes], bool)
+        self._frictionless_body = frictionless if frictionless.any() else None
         self.n_grains = len(vertex_ptr) - 1
         self.n_vertices = int(vertex_ptr[-1])
         self.vertex_ptr = np.asarray(vertex_ptr, np.int64)
