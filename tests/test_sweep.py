@@ -238,3 +238,72 @@ def test_bad_set_exits_2_before_running(tmp_path, cli, setting, problem):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and problem in lines[0], err
     assert not out.exists()
+
+
+# A 4-grain pile collapse of rigid grains (seconds): two seeds, two collapse frictions.
+PILE = """
+scenario = "pile_collapse"
+[model]
+grains = "rigid"
+[pack]
+n_grains = 4
+seed = 5
+[pack.grains]
+vertices = 8
+size = 1.2e-3
+[pack.box]
+width = 3.2e-3
+depth = 3.2e-3
+[contact]
+mu_s = 0.6
+mu_d = 0.5
+[settle]
+max_time = 0.02
+min_time = 0.02
+kinetic_threshold = 1e-2
+[output]
+every = 5e-3
+vtk = false
+"""
+
+
+def test_cases_that_settle_the_same_pack_share_it(tmp_path, cli, scheduler, monkeypatch):
+    from vemdem.scenarios import pack
+
+    config = tmp_path / "pile.toml"
+    config.write_text(PILE)
+    settled = []
+    original = pack.run
+    monkeypatch.setattr(pack, "run", lambda cfg, folder, **kw: (settled.append(cfg["seed"]), original(cfg, folder, **kw))[1])
+    out = tmp_path / "sweep"
+    code, _, err = cli("sweep", config, "--scheduler", scheduler, "--out", out, "--quiet",
+                       "--set", "seed=1,2", "--set", "contact.mu_s=0.6,0.9")  # fmt: skip
+    assert code == 0, err
+    rows = read_table(out / "sweep.csv")[:4]
+    assert [r["status"] for r in rows] == ["ok"] * 4
+    # one pack per seed, not one per case
+    assert sorted(settled) == [1, 2]
+    names = [r["case"] for r in rows]
+    packs = [(out / name / "pack" / "state.npz").read_bytes() for name in names]
+    assert packs[0] == packs[1] != packs[2] == packs[3]
+    # a case that started from a shared pack ends with the bits of the same case run alone
+    code, _, err = cli("run", out / names[3] / "config.toml", "--out", tmp_path / "alone")
+    assert code == 0, err
+    assert sorted(settled) == [1, 2, 2]
+    for name in ("history.csv", "grains.csv", "pack/state.npz"):
+        assert (tmp_path / "alone" / name).read_bytes() == (out / names[3] / name).read_bytes(), name
+
+
+def test_a_failed_shared_pack_fails_each_of_its_cases_with_its_reason(tmp_path):
+    from vemdem.sweep import Case, run_case, shared_packs
+
+    raw = tomllib.loads(PILE)
+    cases = [Case(f"case_{i}", {}, with_values(raw, {"contact.mu_s": mu})) for i, mu in enumerate((0.6, 0.9))]
+    (shared,) = shared_packs(cases, tmp_path)
+    assert shared.cases == (0, 1) and shared.folder == tmp_path / "case_0" / "pack"
+    result = run_case(cases[1].raw, str(tmp_path / "case_1"), str(tmp_path), {"status": "failed", "error": "X: y"},
+                      str(shared.folder))  # fmt: skip
+    assert result == {"status": "failed", "error": f"shared pack stage ({shared.folder}): X: y"}
+    # a case that starts from initial_state has no pack stage to share
+    alone = with_values(raw, {"initial_state": "pack.npz"})
+    assert shared_packs([Case("a", {}, alone), Case("b", {}, alone)], tmp_path) == []

@@ -12,7 +12,9 @@ import copy
 import csv
 import itertools
 import json
+import os
 import re
+import shutil
 import sys
 import tomllib
 
@@ -28,7 +30,7 @@ import numpy as np
 from .config import ConfigError
 from .config.build import resolve_path
 from .analysis.seeds import seed_statistics, varies
-from .scenarios.registry import checked_config, scenario_module
+from .scenarios.registry import checked_config, pack_stage, scenario_module, settle_pack
 
 Scalar = bool | int | float | str
 
@@ -241,9 +243,68 @@ def _failure(exc: BaseException) -> dict[str, str]:
     return {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}
 
 
-def run_case(raw_config: dict, out_dir: str, base_dir: str) -> dict:
-    """Run one case on a Dask worker. Never raises: one broken case must not end the sweep."""
+# ---------------------------------------------------------------------------- shared pack stages
+PACK_FOLDER = "pack"  # where pile_collapse, lid_compression, ... keep their pack stage: DIR/pack
+
+
+@dataclass(frozen=True)
+class SharedPack:
+    folder: Path  # where it is settled: the pack folder of the first case that needs it
+    config: dict  # the complete pack config (scenarios.pack.pack_config)
+    cases: tuple[int, ...]  # the cases that start from it
+
+
+def shared_packs(cases: list[Case], out: Path) -> list[SharedPack]:
+    """Cases whose pack stages would settle the same pack (the same fingerprint: [pack] table,
+    material, model, solver) share one, settled once. A sweep over the collapse's friction or the
+    lid's speed then settles one pack per seed, not one per case; the pack is deterministic, so
+    each case ends with the bits it would have alone."""
+    groups: dict[str, list[int]] = {}
+    configs: dict[str, dict] = {}
+    for i, case in enumerate(cases):
+        stage = pack_stage(case.raw)
+        if stage is not None:
+            key, config = stage
+            groups.setdefault(key, []).append(i)
+            configs[key] = config
+    return [SharedPack(out / cases[members[0]].name / PACK_FOLDER, configs[key], tuple(members))
+            for key, members in groups.items() if len(members) > 1]  # fmt: skip
+
+
+def run_pack(pack_config: dict, folder: str, case_folder: str) -> dict:
+    """Settle a shared pack on a worker (progress shown as its first case's). Never raises."""
+    report = _progress_file(Path(case_folder))
     try:
+        settle_pack(pack_config, Path(folder), progress=lambda i, n, text="": report(i, n, "pack: " + text))
+        return {"status": "ok"}
+    except Exception as exc:  # noqa: BLE001 - every case of the pack reports it
+        return _failure(exc)
+
+
+def _link_or_copy(src: str, dst: str) -> None:
+    try:
+        os.link(src, dst)  # the pack's files are only read after it is settled
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def adopt_pack(shared: Path, own: Path) -> None:
+    """Put the shared pack where the case's scenario looks for its pack stage. A pack folder the
+    case already has (a sweep re-run into the same DIR) is left for the scenario to judge: it
+    reuses one made by the same pack config and refuses any other."""
+    if shared.resolve() != own.resolve() and not own.exists():
+        shutil.copytree(shared, own, copy_function=_link_or_copy)
+
+
+def run_case(raw_config: dict, out_dir: str, base_dir: str, pack: dict | None = None,
+             pack_folder: str | None = None) -> dict:  # fmt: skip
+    """Run one case on a Dask worker (after its shared pack, if any, is settled). Never raises:
+    one broken case must not end the sweep."""
+    try:
+        if pack is not None:
+            if pack.get("status") != "ok":
+                return {"status": "failed", "error": f"shared pack stage ({pack_folder}): {pack.get('error')}"}
+            adopt_pack(Path(pack_folder), Path(out_dir) / PACK_FOLDER)
         cfg, module = checked_config(raw_config)
         summary = module.run(cfg, Path(out_dir), base_dir=Path(base_dir), progress=_progress_file(Path(out_dir)))
         return {**flatten(summary), "status": "ok"}
@@ -319,13 +380,15 @@ def run_cases(
 
     results: list[dict] = [{} for _ in cases]
     with dask_client(scheduler, workers, dashboard) as client:
-        futures = client.map(
-            run_case,
-            [case.raw for case in cases],
-            [str(out / case.name) for case in cases],
-            [str(base_dir)] * len(cases),
-            pure=False,  # a re-run on a shared cluster must run again, not reuse a cached result
-        )
+        # pure=False: a re-run on a shared cluster must run again, not reuse a cached result
+        packs: dict[int, tuple] = {}
+        for shared in shared_packs(cases, out):
+            future = client.submit(run_pack, shared.config, str(shared.folder), str(shared.folder.parent), pure=False)
+            packs.update({i: (future, str(shared.folder)) for i in shared.cases})
+        futures = [
+            client.submit(run_case, case.raw, str(out / case.name), str(base_dir), *packs.get(i, ()), pure=False)
+            for i, case in enumerate(cases)
+        ]
         index = {future.key: i for i, future in enumerate(futures)}
         done: set[int] = set()
         with tqdm(total=len(cases), file=sys.stderr, disable=quiet, unit="case", dynamic_ncols=True) as bar:

@@ -105,7 +105,8 @@ def pack_config(cfg: dict) -> dict:
             "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
 
 
-def _stage_fingerprint(pack_dir: Path):
+def stage_fingerprint(pack_dir: Path) -> str | None:
+    """The fingerprint of the config that made the finished stage in `pack_dir`, if any."""
     try:
         return json.loads((pack_dir / "summary.json").read_text()).get("config_fingerprint")
     except (OSError, ValueError):
@@ -122,7 +123,7 @@ def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume
         path = pack_dir / "state.npz"
         wanted = config_fingerprint(pack_cfg)
         if (pack_dir / "summary.json").is_file():
-            if _stage_fingerprint(pack_dir) != wanted:
+            if stage_fingerprint(pack_dir) != wanted:
                 raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
                                   "use another --out, or --overwrite to settle it again")  # fmt: skip
         else:
@@ -151,7 +152,7 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     meta = state.meta
     stage = dict(cfg, settle=dict(cfg["settle"], min_time=0.0), solver=dict(cfg["solver"], mass_damping=SETTLING_DAMPING))
     fingerprint = config_fingerprint({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
-    if (folder / "summary.json").is_file() and _stage_fingerprint(folder) == fingerprint:
+    if (folder / "summary.json").is_file() and stage_fingerprint(folder) == fingerprint:
         return load_state(folder / "state.npz")
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)

@@ -54,3 +54,27 @@ def example_text(name: str) -> str:
     if name not in EXAMPLES:
         raise ConfigError(f"example: unknown example {name!r} (known: {', '.join(EXAMPLES)})")
     return files("vemdem").joinpath("examples", EXAMPLES[name]).read_text()
+
+
+def pack_stage(raw: dict) -> tuple[str, dict] | None:
+    """The pack a scenario settles into DIR/pack before its own stage, as (fingerprint, pack
+    config); None when it has no pack stage or starts from `initial_state`. Two cases with the
+    same fingerprint settle the same pack, to the bit."""
+    cfg, module = checked_config(raw)
+    if "pack" not in module.SCHEMA or cfg.get("initial_state"):
+        return None
+    from . import pack
+    from ..driver.checkpoint import config_fingerprint
+
+    config = pack.pack_config(cfg)
+    return config_fingerprint(config), config
+
+
+def settle_pack(config: dict, folder, progress=None) -> None:
+    """Run a pack stage on its own (the config from `pack_stage`) into `folder`, where a scenario
+    finds it; a pack already settled there from the same config is kept, as the scenario would."""
+    from . import pack
+    from ..driver.checkpoint import config_fingerprint
+
+    if pack.stage_fingerprint(folder) != config_fingerprint(config):
+        pack.run(config, folder, progress=progress)
