@@ -90,7 +90,6 @@ class VemBodies:
         self.block_ptr = el.block_ptr
         self.dof_ptr = 3 * el.vertex_ptr
         self.body_mass = material.density * el.volume
-        self._mass_matrix = None
         self._spectrum = None  # per-grain eigenvalues at rest (critical_steps, vibration_periods)
 
     @property
@@ -116,9 +115,7 @@ class VemBodies:
         return tangent_matrix(self.elements, blocks)
 
     def mass_matrix(self) -> sp.csr_matrix:
-        if self._mass_matrix is None:
-            self._mass_matrix = self.mass.matrix()
-        return self._mass_matrix
+        return self.mass.matrix()
 
     def critical_steps(self) -> np.ndarray:
         """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the

@@ -21,7 +21,7 @@ of mass; rotational inertia is only approximate, as for any lumping).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -40,15 +40,37 @@ class GrainMass:
     lumped: np.ndarray  # (N,) row sums of the blended mass
     load: np.ndarray  # (N,) gravity load weights: f_g[v] = load[v] * g
     vertex_ptr: np.ndarray
+    _matrix: sp.csr_matrix | None = field(default=None, init=False, repr=False, compare=False)
 
     def block(self, g: int) -> np.ndarray:
         n = self.vertex_ptr[g + 1] - self.vertex_ptr[g]
         return self.blocks[self.block_ptr[g] : self.block_ptr[g + 1]].reshape(n, n)
 
     def matrix(self) -> sp.csr_matrix:
-        """The consistent 3N x 3N mass matrix (dof 3 v + i)."""
-        mats = [sp.kron(self.block(g), sp.identity(3)) for g in range(len(self.vertex_ptr) - 1)]
-        return sp.block_diag(mats, format="csr")
+        """The consistent 3N x 3N mass matrix (dof 3 v + i), built once: the scenes' kinetic
+        energy reads it at every frame and settling check (a per-grain kron took 0.35 s at 160
+        grains, a quarter of a rigid collapse's wall time)."""
+        if self._matrix is None:
+            self._matrix = block_diagonal_mass(self.blocks, self.block_ptr, self.vertex_ptr)
+        return self._matrix
+
+
+def block_diagonal_mass(blocks: np.ndarray, block_ptr: np.ndarray, vertex_ptr: np.ndarray) -> sp.csr_matrix:
+    """blockdiag_g (M_g (x) I_3) from the flat scalar blocks: entry (3(o+v)+i, 3(o+w)+i) = M_g[v, w]
+    for the grain's vertex offset o; rows keep their columns in ascending order."""
+    n = np.diff(vertex_ptr)
+    grain = np.repeat(np.arange(len(n)), n * n)
+    local = np.arange(len(blocks)) - block_ptr[grain]
+    row_v = vertex_ptr[grain] + local // n[grain]
+    col_v = vertex_ptr[grain] + local % n[grain]
+    lane = np.arange(3)
+    size = 3 * int(vertex_ptr[-1])
+    # order the entries by (vertex row, direction, column): each dof row is contiguous and sorted
+    rows = (3 * row_v[:, None] + lane).reshape(-1)
+    cols = (3 * col_v[:, None] + lane).reshape(-1)
+    order = np.lexsort((cols, rows))
+    data = np.repeat(blocks, 3)[order]
+    return sp.csr_matrix(sp.coo_matrix((data, (rows[order], cols[order])), shape=(size, size)))
 
     def total(self) -> float:
         return float(self.lumped.sum())
