@@ -307,3 +307,17 @@ def test_a_failed_shared_pack_fails_each_of_its_cases_with_its_reason(tmp_path):
     # a case that starts from initial_state has no pack stage to share
     alone = with_values(raw, {"initial_state": "pack.npz"})
     assert shared_packs([Case("a", {}, alone), Case("b", {}, alone)], tmp_path) == []
+
+
+def test_a_settled_shared_pack_says_so_in_its_first_case_progress(tmp_path, monkeypatch):
+    import vemdem.sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "settle_pack", lambda config, folder, progress: progress(3, 200, "t = 0.1 s"))
+    assert sweep_mod.run_pack({}, str(tmp_path / "pack"), str(tmp_path)) == {"status": "ok"}
+    assert (tmp_path / "progress.txt").read_text() == "pack settled, shared; the case waits for a worker"
+
+    def broken(config, folder, progress):
+        raise RuntimeError("no room")
+
+    monkeypatch.setattr(sweep_mod, "settle_pack", broken)
+    assert sweep_mod.run_pack({}, str(tmp_path / "pack"), str(tmp_path)) == {"status": "failed", "error": "RuntimeError: no room"}

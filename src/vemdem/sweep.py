@@ -276,6 +276,7 @@ def run_pack(pack_config: dict, folder: str, case_folder: str) -> dict:
     report = _progress_file(Path(case_folder))
     try:
         settle_pack(pack_config, Path(folder), progress=lambda i, n, text="": report(i, n, "pack: " + text))
+        report(0, 0, "pack settled, shared; the case waits for a worker")  # not the pack's last time
         return {"status": "ok"}
     except Exception as exc:  # noqa: BLE001 - every case of the pack reports it
         return _failure(exc)
@@ -319,7 +320,7 @@ def _progress_file(folder: Path):
 
     def progress(i: int, n: int, text: str = "") -> None:
         try:
-            tmp.write_text(f"{i}/{n} {text}".strip())
+            tmp.write_text(f"{i}/{n} {text}".strip() if n else text)  # n = 0: a state, not a count
             tmp.replace(path)
         except OSError:
             pass  # progress is a courtesy: a full disk must fail the case where it writes results
