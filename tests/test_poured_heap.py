@@ -5,6 +5,7 @@ heap's shape: grains that roll further off and a lower, wider heap when friction
 import numpy as np
 import pytest
 
+from vemdem.config import ConfigError
 from vemdem.contact.walls import box_sides, disc_wall
 from vemdem.io.state import load_state
 from vemdem.scenarios.registry import checked_config
@@ -56,3 +57,41 @@ def test_a_poured_heap_stands_higher_with_more_friction(tmp_path, pack):
         heaps[name] = (c[on, 2].mean(), summary["angle_fixed_base_deg"], summary["lost_grains"])
     assert heaps["smooth"][0] < heaps["rough"][0]  # the mean grain sits lower
     assert heaps["smooth"][1] <= heaps["rough"][1]  # and the heap's top too
+
+
+def test_corner_walls_mirror_and_the_disc_is_centred_on_the_corner():
+    from vemdem.scenarios.poured_heap import hopper_walls
+
+    meta = {"box": [2e-3, 3e-3], "centre": [1.0, 2.0], "floor": 0.5}
+    cfg, _ = checked_config({"scenario": "poured_heap", "source": {"open": "corner"}, "disc": {"radius": 4e-3}})
+    planes, meshes, lift_time = hopper_walls(meta, 0.5 + 3e-3, cfg)
+    catch, back, side = planes
+    assert catch.point[2] == pytest.approx(0.5 - cfg["disc"]["catch_depth"]) and not catch.frictionless
+    # the standing sides: the planes x = 0.999 (normal +x) and y = 1.9985 (normal +y), frictionless
+    assert back.frictionless and side.frictionless
+    assert back.point[0] == pytest.approx(0.999) and back.normal @ [1, 0, 0] == pytest.approx(1.0)
+    assert side.point[1] == pytest.approx(1.9985) and side.normal @ [0, 1, 0] == pytest.approx(1.0)
+    disc, *rising = meshes
+    assert [m.name for m in rising] == ["side +x", "side +y"]
+    rim = disc.vertices[:, :2] - [0.999, 1.9985]
+    assert np.allclose(np.linalg.norm(rim, axis=1).max(), 4e-3)  # centred on the corner
+    assert lift_time == pytest.approx(1.5 * 3e-3 / cfg["source"]["lift_speed"])
+    # the disc must reach beyond the box's far corner, measured from the corner
+    small, _ = checked_config({"scenario": "poured_heap", "source": {"open": "corner"}, "disc": {"radius": 3.5e-3}})
+    with pytest.raises(ConfigError, match="from the corner"):
+        hopper_walls(meta, 0.5 + 3e-3, small)
+
+
+def test_a_corner_heap_stays_in_its_quadrant(tmp_path, pack):
+    cfg, module = checked_config({"scenario": "poured_heap", "initial_state": str(pack),
+                                  "source": {"lift_speed": 0.05, "open": "corner"}, "disc": {"radius": 9e-3},
+                                  "model": {"grains": "rigid"}, "output": {"vtk": False, "every": 1e-2}})  # fmt: skip
+    summary = module.run(cfg, tmp_path)
+    assert summary["source_open"] == "corner" and summary["heap_grains"] + summary["lost_grains"] == 16
+    final = load_state(tmp_path / "state.npz")
+    corner = np.array(final.meta["centre"]) - 0.5 * np.array(final.meta["box"])
+    # no vertex behind the mirror planes, and the heap spread away from the corner
+    assert np.all(final.x[:, :2] > corner)
+    start = load_state(pack)
+    assert np.max(final.x[:, 0]) > np.max(start.x[:, 0]) + 1e-3
+    assert (tmp_path / "heap.png").stat().st_size > 10_000

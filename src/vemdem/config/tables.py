@@ -292,6 +292,10 @@ POURED_HEAP = {
     "source": {
         "lift_speed": Field(float, 0.02, positive, "speed at which the box around the pack rises (m/s): the grains "
                             "flow out under it, slow against their settling speed"),
+        "open": Field(("all", "corner"), "all",
+                      doc="all: the four sides rise, the disc is centred under the box; corner: the -x and -y "
+                          "sides stay as frictionless mirror planes, the +x and +y sides rise, and the disc is "
+                          "centred on the corner: a quarter of the heap of a pack four times as large"),
     },
     "disc": {
         "radius": Field(float, 8e-3, positive, "radius of the floor disc (m); grains that roll off it are lost"),

@@ -21,6 +21,7 @@ heap.png (side view with the fitted slope), heap_3d.png, state.npz, and the scen
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ from ..analysis.plots import plot_grains_3d
 from ..analysis.repose import measure_pile, plot_heap, plot_pile
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
-from ..contact.walls import Motion, PlaneWall, box_sides, disc_wall
+from ..contact.walls import Motion, PlaneWall, box_sides, box_walls, disc_wall
 from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
@@ -43,22 +44,39 @@ RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.POURED_HEAP
 
 
+def heap_centre(meta: dict, opened: str) -> tuple[float, float]:
+    """Where the disc is centred: under the box, or on the corner of its two standing sides."""
+    (w, d), (cx, cy) = meta["box"], meta["centre"]
+    return (cx - 0.5 * w, cy - 0.5 * d) if opened == "corner" else (cx, cy)
+
+
 def hopper_walls(meta: dict, top: float, cfg: dict) -> tuple[list, list, float]:
-    """(planes, meshes, lift time): the catch floor; the disc and the box's four rising sides."""
+    """(planes, meshes, lift time): the catch floor; the disc and the box's rising sides. With
+    `source.open = "corner"` the -x and -y sides stay, as infinite frictionless planes (mirror
+    planes, as pile_collapse's corner), and the disc is centred on their corner."""
     (w, d), centre, floor = meta["box"], tuple(meta["centre"]), meta["floor"]
+    opened = cfg["source"]["open"]
+    middle = heap_centre(meta, opened)
     radius = cfg["disc"]["radius"]
-    if radius <= 0.5 * np.hypot(w, d):
+    reach = np.hypot(w, d) if opened == "corner" else 0.5 * np.hypot(w, d)
+    if radius <= reach:
+        where = "the corner" if opened == "corner" else "its centre"
         raise ConfigError(f"disc.radius: the disc ({radius:g} m) must reach beyond the box's corners "
-                          f"({0.5 * np.hypot(w, d):.3g} m from its centre)")  # fmt: skip
+                          f"({reach:.3g} m from {where})")  # fmt: skip
     height = top - floor
     lift = 1.5 * height  # the sides' bottom edges end half a pack height above its top
     lift_time = lift / cfg["source"]["lift_speed"]
     rising = Motion(times=(0.0, lift_time), displacements=((0.0, 0.0, 0.0), (0.0, 0.0, lift)))
     sides = box_sides(w, d, floor, 1.1 * height, centre, rising)
-    disc = disc_wall(radius, floor, centre)
-    catch = PlaneWall(np.array([centre[0], centre[1], floor - cfg["disc"]["catch_depth"]]), np.array([0.0, 0.0, 1.0]),
+    disc = disc_wall(radius, floor, middle)
+    catch = PlaneWall(np.array([middle[0], middle[1], floor - cfg["disc"]["catch_depth"]]), np.array([0.0, 0.0, 1.0]),
                       name="catch floor")  # fmt: skip
-    return [catch], [disc, *sides], lift_time
+    planes = [catch]
+    if opened == "corner":
+        sides = [side for side in sides if side.name in ("side +x", "side +y")]
+        _floor, back, _front, side_lo, _side_hi = box_walls(w, d, floor, centre)
+        planes += [replace(back, frictionless=True), replace(side_lo, frictionless=True)]
+    return planes, [disc, *sides], lift_time
 
 
 def heap_part(on_disc: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray):
@@ -87,7 +105,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                       stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
     summary = run_summary("poured_heap", scene, result, t_start)
-    summary.update(measure_heap(scene, state, meta, cfg["disc"]["radius"], out_dir))
+    summary.update(measure_heap(scene, state, meta, cfg["disc"]["radius"], out_dir, cfg["source"]["open"]))
+    summary["source_open"] = cfg["source"]["open"]
     summary["lift_time"] = lift_time
     summary["settled"] = result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
@@ -100,18 +119,23 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     return summary
 
 
-def measure_heap(scene, state, meta: dict, radius: float, out_dir: Path) -> dict:
-    """The heap on the disc (grains above it): angle, height, counts, and its pictures."""
+def measure_heap(scene, state, meta: dict, radius: float, out_dir: Path, opened: str = "all") -> dict:
+    """The heap on the disc (grains above it): angle, height, counts, and its pictures. A corner
+    heap is measured from the corner, as pile_collapse's (analysis.repose, plan "corner")."""
     centroids = scene.grain_centroids(state.x)
-    centre, floor = meta["centre"], meta["floor"]
+    centre, floor = heap_centre(meta, opened), meta["floor"]
     reach = np.hypot(centroids[:, 0] - centre[0], centroids[:, 1] - centre[1])
     on_disc = (centroids[:, 2] > floor) & (reach < radius + scene.grain_size)
     friction = scene.contact.friction
     title = f"poured heap: {int(on_disc.sum())} grains, mu_s = {friction.mu_s:g}, mu_d = {friction.mu_d:g}"
+    # measured as the pile of a box as wide as the disc (the runout it implies is not reported):
+    # centred on the disc, or with its corner on the disc's centre
+    box = {"box": [2 * radius, 2 * radius], "centre": [centre[0] + radius, centre[1] + radius]} \
+        if opened == "corner" else {"box": [2 * radius, 2 * radius]}  # fmt: skip
     if on_disc.sum() >= 2:
         vertex_grain = scene.contact.topology.vertex_grain[: scene.n_vertices]
         repose, figures = measure_pile(centroids[on_disc], *heap_part(on_disc, state.x, vertex_grain),
-                                       scene.grain_size, {**meta, "box": [2 * radius, 2 * radius]})  # fmt: skip
+                                       scene.grain_size, {**meta, **box}, opened)  # fmt: skip
     else:
         repose, figures = None, {"angle_of_repose_deg": None, "angle_of_repose_error": "no grain stayed on the disc",
                                  "pile_height": 0.0}  # fmt: skip
@@ -119,7 +143,8 @@ def measure_heap(scene, state, meta: dict, radius: float, out_dir: Path) -> dict
         plot_pile(repose, centroids[on_disc], out_dir / "heap.png", title=title)
     else:
         plot_heap(centroids[on_disc], tuple(centre), out_dir / "heap.png", title,
-                  note=f"no angle of repose: {figures['angle_of_repose_error']}")  # fmt: skip
+                  note=f"no angle of repose: {figures['angle_of_repose_error']}",
+                  plan="corner" if opened == "corner" else "round")  # fmt: skip
     plot_grains_3d(out_dir / "heap_3d.png", state.x, *scene.surface_triangles(), title=title, floor_z=floor)
     figures.pop("runout", None)  # the disc's rim bounds the heap: no runout to speak of
     return {**figures, "angle_fixed_base_deg": float(np.degrees(np.arctan2(figures["pile_height"], radius))),
