@@ -275,7 +275,7 @@ def run_pack(pack_config: dict, folder: str, case_folder: str) -> dict:
     """Settle a shared pack on a worker (progress shown as its first case's). Never raises."""
     report = _progress_file(Path(case_folder))
     try:
-        settle_pack(pack_config, Path(folder), progress=lambda i, n, text="": report(i, n, "pack: " + text))
+        settle_pack(pack_config, Path(folder), progress=report)
         report(0, 0, "pack settled, shared; the case waits for a worker")  # not the pack's last time
         return {"status": "ok"}
     except Exception as exc:  # noqa: BLE001 - every case of the pack reports it

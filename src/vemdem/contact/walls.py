@@ -9,7 +9,7 @@ rigid surfaces whose vertices are prescribed, not unknowns.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -114,6 +114,13 @@ def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0
         PlaneWall(np.array([cx, cy - hy, floor_z]), np.array([0.0, 1.0, 0.0]), gone, "wall -y"),
         PlaneWall(np.array([cx, cy + hy, floor_z]), np.array([0.0, -1.0, 0.0]), gone, "wall +y"),
     ]
+
+
+def corner_mirrors(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0.0)) -> list[PlaneWall]:
+    """The -x and -y walls of box_walls' box, frictionless: mirror planes, so the grains in their
+    corner move as if the mirrored quarters of a box four times as large were there."""
+    _floor, back, _front, side_lo, _side_hi = box_walls(size_x, size_y, floor_z, center)
+    return [replace(back, frictionless=True), replace(side_lo, frictionless=True)]
 
 
 def disc_wall(radius: float, z: float = 0.0, centre=(0.0, 0.0), segments: int = 64, name: str = "disc") -> MeshWall:

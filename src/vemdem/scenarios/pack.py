@@ -105,12 +105,25 @@ def pack_config(cfg: dict) -> dict:
             "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
 
 
-def stage_fingerprint(pack_dir: Path) -> str | None:
-    """The fingerprint of the config that made the finished stage in `pack_dir`, if any."""
+def _stage_fingerprint(pack_dir: Path):
     try:
         return json.loads((pack_dir / "summary.json").read_text()).get("config_fingerprint")
     except (OSError, ValueError):
         return None
+
+
+def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = False) -> None:
+    """Settle a pack stage into pack_dir, unless it holds one settled from the same pack config
+    (kept); one from another config is refused. An interrupted stage is continued by resume."""
+    pack_dir = Path(pack_dir)
+    if (pack_dir / "summary.json").is_file():
+        if _stage_fingerprint(pack_dir) != config_fingerprint(pack_cfg):
+            raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
+                              "use another --out, or --overwrite to settle it again")  # fmt: skip
+        return
+    resume_pack = resume and (pack_dir / "checkpoint.npz").is_file()
+    stage = progress and (lambda i, n, text="": progress(i, n, "pack: " + text))
+    run(pack_cfg, pack_dir, progress=stage, resume=resume_pack)
 
 
 def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume: bool = False):
@@ -118,18 +131,9 @@ def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume
     given, else a pack settled now into DIR/pack. A finished pack stage is reused only when it was
     made by the same pack config; an interrupted one is continued by --resume."""
     if not cfg["initial_state"]:
-        pack_cfg = pack_config(cfg)
         pack_dir = Path(out_dir) / "pack"
         path = pack_dir / "state.npz"
-        wanted = config_fingerprint(pack_cfg)
-        if (pack_dir / "summary.json").is_file():
-            if stage_fingerprint(pack_dir) != wanted:
-                raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
-                                  "use another --out, or --overwrite to settle it again")  # fmt: skip
-        else:
-            resume_pack = resume and (pack_dir / "checkpoint.npz").is_file()
-            stage = progress and (lambda i, n, text="": progress(i, n, "pack: " + text))
-            run(pack_cfg, pack_dir, progress=stage, resume=resume_pack)
+        settle_stage(pack_config(cfg), pack_dir, progress, resume)
     else:
         path = resolve_path(cfg["initial_state"], base_dir)
     try:
@@ -152,7 +156,7 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     meta = state.meta
     stage = dict(cfg, settle=dict(cfg["settle"], min_time=0.0), solver=dict(cfg["solver"], mass_damping=SETTLING_DAMPING))
     fingerprint = config_fingerprint({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
-    if (folder / "summary.json").is_file() and stage_fingerprint(folder) == fingerprint:
+    if (folder / "summary.json").is_file() and _stage_fingerprint(folder) == fingerprint:
         return load_state(folder / "state.npz")
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)

@@ -17,14 +17,13 @@ pile.png (side view with the fitted slope), pile_3d.png (3D view), state.npz (th
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from ..analysis.plots import plot_grains_3d
 from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
-from ..contact.walls import box_walls
+from ..contact.walls import box_walls, corner_mirrors
 from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
@@ -42,11 +41,12 @@ def standing_walls(meta: dict, opened: str) -> list:
     """The walls left at t = 0: the floor; for a channel ("front") the back (-x) and side walls too;
     for a corner the -x and -y walls, frictionless (mirror planes: the grains along them move as
     if their mirror images were there)."""
-    floor, back, _front, side_lo, side_hi = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
+    box = (*meta["box"], meta["floor"], tuple(meta["centre"]))
+    floor, back, _front, side_lo, side_hi = box_walls(*box)
     if opened == "front":
         return [floor, back, side_lo, side_hi]
     if opened == "corner":
-        return [floor, replace(back, frictionless=True), replace(side_lo, frictionless=True)]
+        return [floor, *corner_mirrors(*box)]
     return [floor]
 
 

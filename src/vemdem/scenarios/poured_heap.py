@@ -21,16 +21,15 @@ heap.png (side view with the fitted slope), heap_3d.png, state.npz, and the scen
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..analysis.plots import plot_grains_3d
-from ..analysis.repose import measure_pile, plot_heap, plot_pile
+from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
-from ..contact.walls import Motion, PlaneWall, box_sides, box_walls, disc_wall
+from ..contact.walls import Motion, PlaneWall, box_sides, corner_mirrors, disc_wall
 from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
@@ -45,9 +44,9 @@ SCHEMA = tables.POURED_HEAP
 
 
 def heap_centre(meta: dict, opened: str) -> tuple[float, float]:
-    """Where the disc is centred: under the box, or on the corner of its two standing sides."""
-    (w, d), (cx, cy) = meta["box"], meta["centre"]
-    return (cx - 0.5 * w, cy - 0.5 * d) if opened == "corner" else (cx, cy)
+    """Where the disc is centred: the pile's axis (under the box, or the corner of its two
+    standing sides), as the collapse measures from it."""
+    return tuple(pile_axis(meta, opened)[0])
 
 
 def hopper_walls(meta: dict, top: float, cfg: dict) -> tuple[list, list, float]:
@@ -74,8 +73,7 @@ def hopper_walls(meta: dict, top: float, cfg: dict) -> tuple[list, list, float]:
     planes = [catch]
     if opened == "corner":
         sides = [side for side in sides if side.name in ("side +x", "side +y")]
-        _floor, back, _front, side_lo, _side_hi = box_walls(w, d, floor, centre)
-        planes += [replace(back, frictionless=True), replace(side_lo, frictionless=True)]
+        planes += corner_mirrors(w, d, floor, centre)
     return planes, [disc, *sides], lift_time
 
 

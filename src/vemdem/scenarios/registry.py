@@ -72,9 +72,8 @@ def pack_stage(raw: dict) -> tuple[str, dict] | None:
 
 def settle_pack(config: dict, folder, progress=None) -> None:
     """Run a pack stage on its own (the config from `pack_stage`) into `folder`, where a scenario
-    finds it; a pack already settled there from the same config is kept, as the scenario would."""
+    finds it, with the scenario's rules: a pack settled there from the same config is kept, one
+    from another config refused (scenarios.pack.settle_stage). Progress lines start "pack: "."""
     from . import pack
-    from ..driver.checkpoint import config_fingerprint
 
-    if pack.stage_fingerprint(folder) != config_fingerprint(config):
-        pack.run(config, folder, progress=progress)
+    pack.settle_stage(config, folder, progress)

@@ -48,8 +48,8 @@ class GrainMass:
 
     def matrix(self) -> sp.csr_matrix:
         """The consistent 3N x 3N mass matrix (dof 3 v + i), built once: the scenes' kinetic
-        energy reads it at every frame and settling check (a per-grain kron took 0.35 s at 160
-        grains, a quarter of a rigid collapse's wall time)."""
+        energy reads it at every frame and settling check (rebuilt with a kron per grain, it took
+        0.35 s each at 160 grains: 3.5 s of a 47 s profiled collapse)."""
         if self._matrix is None:
             self._matrix = block_diagonal_mass(self.blocks, self.block_ptr, self.vertex_ptr)
         return self._matrix
