@@ -375,11 +375,13 @@ def rigid_pair_inverse_masses(x_all, ints, floats, centre, rotation, mass, momen
     out = np.zeros(len(ints))
     w0 = np.empty(6)
     D = np.empty((6, 2))
+    d = np.empty(3)
+    p = np.empty(3)
     for c in range(len(ints)):
         kind = ints[c, KIND]
         w = pair_weights(kind, floats[c, C0], floats[c, C1], w0, D)
-        d = np.zeros(3)
-        p = np.zeros(3)
+        d[:] = 0.0
+        p[:] = 0.0
         n_a = 2 if kind == EDGE_EDGE else 1
         for i in range(N_NODES[kind]):
             node = ints[c, NODE0 + i]
@@ -387,15 +389,19 @@ def rigid_pair_inverse_masses(x_all, ints, floats, centre, rotation, mass, momen
                 d[a] += w[i] * x_all[node, a]
                 if i >= n_a:  # side B's point (by role: a wall plane's weights take any sign)
                     p[a] -= w[i] * x_all[node, a]
-        n = d / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        n0, n1, n2 = d[0] / norm, d[1] / norm, d[2] / norm
         for side in (GRAIN_A, GRAIN_B):
             g = ints[c, side]
             if g >= G:
                 continue
-            r = p - centre[g]
-            rn = np.cross(r, n)
-            body = rotation[g].T @ rn
-            out[c] += 1.0 / mass[g] + np.sum(body * body / moments[g])
+            r0, r1, r2 = p[0] - centre[g, 0], p[1] - centre[g, 1], p[2] - centre[g, 2]
+            q0, q1, q2 = r1 * n2 - r2 * n1, r2 * n0 - r0 * n2, r0 * n1 - r1 * n0  # r x n, written out: numba's
+            inv = 1.0 / mass[g]  # np.cross and 3x3 products cost more to compile and to call than the pair
+            for k in range(3):
+                b = rotation[g, 0, k] * q0 + rotation[g, 1, k] * q1 + rotation[g, 2, k] * q2  # (R^T (r x n))_k
+                inv += b * b / moments[g, k]
+            out[c] += inv
     return out
 
 

@@ -210,23 +210,67 @@ def _boxes_near(box, i, j, gbar):
     return True
 
 
+# A slab test along the line between the two grains' box centres, n (unit): every point of a
+# feature of A projects on n at most the largest projection of its nodes, every point of B at
+# least min over B's vertices, so a feature of A whose nodes all project below min_B - gbar lies
+# farther than gbar from all of B (for any polyhedra: a feature is the convex hull of its nodes);
+# the same for B with the roles swapped. Its margin is far above the round-off of a projection,
+# so the exact tests below see the same candidates in the same order: the same records.
+SLAB_MARGIN = 1e-9
+
+
 @njit(cache=True)
-def _features_near(x, A, lo, hi, vptr, fptr, eptr, fbox, ebox, buf):
-    """Vertices, faces and edges of grain A whose boxes meet [lo, hi], as three views into buf
-    (one allocation per grain pair: allocations dominated this kernel, docs/contact.md)."""
+def _slab_axis(glo, ghi, A, B):
+    n = np.empty(3)
+    for a in range(3):
+        n[a] = 0.5 * (glo[B, a] + ghi[B, a] - glo[A, a] - ghi[A, a])
+    norm = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    if norm > 0.0:
+        n /= norm
+    return n, norm > 0.0
+
+
+@njit(cache=True)
+def _project(x, start, stop, n, out):
+    """out[k] = x[start + k] . n; returns (min, max)."""
+    lo, hi = np.inf, -np.inf
+    for k in range(stop - start):
+        d = x[start + k, 0] * n[0] + x[start + k, 1] * n[1] + x[start + k, 2] * n[2]
+        out[k] = d
+        lo = min(lo, d)
+        hi = max(hi, d)
+    return lo, hi
+
+
+@njit(cache=True)
+def _features_near(x, A, lo, hi, vptr, fptr, eptr, fbox, ebox, proj, sign, bound, v_face_ptr, v_faces,
+                   v_edge_ptr, v_edges, buf, mark):  # fmt: skip
+    """Vertices, faces and edges of grain A whose boxes meet [lo, hi] and that reach the slab
+    sign * proj >= sign * bound (proj: A's vertices projected on the slab axis), as three views
+    into buf (one allocation per grain pair: allocations dominated this kernel, docs/contact.md).
+    A face or an edge reaches the slab iff one of its nodes does: they are marked from the
+    vertices in the slab (mark: zeros, one per face then one per edge of A) and read in order."""
+    v0, f0, e0 = vptr[A], fptr[A], eptr[A]
+    nfa = fptr[A + 1] - f0
     nv = nf = ne = 0
-    for v in range(vptr[A], vptr[A + 1]):
+    for v in range(v0, vptr[A + 1]):
+        if sign * proj[v - v0] < sign * bound:
+            continue
+        for k in range(v_face_ptr[v], v_face_ptr[v + 1]):
+            mark[v_faces[k] - f0] = 1
+        for k in range(v_edge_ptr[v], v_edge_ptr[v + 1]):
+            mark[nfa + v_edges[k] - e0] = 1
         if lo[0] <= x[v, 0] <= hi[0] and lo[1] <= x[v, 1] <= hi[1] and lo[2] <= x[v, 2] <= hi[2]:
             buf[nv] = v
             nv += 1
     fs = buf[nv:]
-    for f in range(fptr[A], fptr[A + 1]):
-        if _box_meets(fbox, f, lo, hi):
+    for f in range(f0, fptr[A + 1]):
+        if mark[f - f0] and _box_meets(fbox, f, lo, hi):
             fs[nf] = f
             nf += 1
     es = fs[nf:]
-    for e in range(eptr[A], eptr[A + 1]):
-        if _box_meets(ebox, e, lo, hi):
+    for e in range(e0, eptr[A + 1]):
+        if mark[nfa + e - e0] and _box_meets(ebox, e, lo, hi):
             es[ne] = e
             ne += 1
     return buf[:nv], fs[:nf], es[:ne]
@@ -261,11 +305,26 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
     for a in range(3):
         if box[0, a] > box[1, a] or box[2, a] > box[3, a]:
             return 0  # the boxes are more than gbar apart
-    sizeA = vptr[A + 1] - vptr[A] + fptr[A + 1] - fptr[A] + eptr[A + 1] - eptr[A]
-    sizeB = vptr[B + 1] - vptr[B] + fptr[B + 1] - fptr[B] + eptr[B + 1] - eptr[B]
-    buf = np.empty(sizeA + sizeB, dtype=np.int64)
-    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, fbox, ebox, buf[:sizeA])
-    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, fbox, ebox, buf[sizeA:])
+    nA, nB = vptr[A + 1] - vptr[A], vptr[B + 1] - vptr[B]
+    sizeA = nA + fptr[A + 1] - fptr[A] + eptr[A + 1] - eptr[A]
+    sizeB = nB + fptr[B + 1] - fptr[B] + eptr[B + 1] - eptr[B]
+    buf = np.empty(2 * (sizeA + sizeB) - nA - nB, dtype=np.int64)  # features, then marks (faces, edges)
+    proj = np.empty(nA + nB)
+    axis, has_axis = _slab_axis(glo, ghi, A, B)
+    minA, maxA = _project(x, vptr[A], vptr[A + 1], axis, proj[:nA])
+    minB, maxB = _project(x, vptr[B], vptr[B + 1], axis, proj[nA:])
+    reach = gbar * (1.0 + SLAB_MARGIN)
+    if not has_axis:  # coinciding box centres: no slab
+        maxA, minB = np.inf, -np.inf
+    elif maxA + reach < minB:
+        return 0  # a plane between the grains, more than gbar from each
+    marks = buf[sizeA + sizeB :]
+    marks[:] = 0
+    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, fbox, ebox, proj[:nA], 1.0, minB - reach,
+                                v_face_ptr, v_faces, v_edge_ptr, v_edges, buf[:sizeA], marks[: sizeA - nA])  # fmt: skip
+    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, fbox, ebox, proj[nA:], -1.0, maxA + reach,
+                                v_face_ptr, v_faces, v_edge_ptr, v_edges, buf[sizeA : sizeA + sizeB],
+                                marks[sizeA - nA :])  # fmt: skip
     # vertex-face, both ways: the vertex's grain is side "A" of the record
     for side in range(2):
         verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)

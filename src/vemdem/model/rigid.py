@@ -22,20 +22,7 @@ from ..vem.element import Evaluation, VemOptions, build_elements
 from ..vem.mass import build_mass
 from ..vem.material import Material
 
-__all__ = ["RigidBodies", "fit_rigid", "place_vertices", "rotation_about"]
-
-
-@njit(cache=True)
-def rotation_about(axis, angle):
-    """Rotation matrix by `angle` about the unit vector `axis` (Rodrigues)."""
-    k0, k1, k2 = axis[0], axis[1], axis[2]
-    c, s = np.cos(angle), np.sin(angle)
-    C = 1.0 - c
-    out = np.empty((3, 3))
-    out[0, 0], out[0, 1], out[0, 2] = c + k0 * k0 * C, k0 * k1 * C - k2 * s, k0 * k2 * C + k1 * s
-    out[1, 0], out[1, 1], out[1, 2] = k1 * k0 * C + k2 * s, c + k1 * k1 * C, k1 * k2 * C - k0 * s
-    out[2, 0], out[2, 1], out[2, 2] = k2 * k0 * C - k1 * s, k2 * k1 * C + k0 * s, c + k2 * k2 * C
-    return out
+__all__ = ["RigidBodies", "fit_rigid", "place_vertices"]
 
 
 @njit(cache=True, parallel=True)

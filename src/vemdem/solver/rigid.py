@@ -28,42 +28,88 @@ from numba import njit, prange
 
 from ..contact.ccd import damped_pair_step, rigid_pair_inverse_masses
 from ..contact.model import PenetrationError
-from ..model.rigid import RigidBodies, fit_rigid, rotation_about
+from ..model.rigid import RigidBodies, fit_rigid
 from ..model.scene import Scene
 from .explicit import ExplicitIntegrator, ExplicitParameters
 from .state import State, StepInfo, StepRejected
 
-_AXES = np.eye(3)
+@njit(cache=True)
+def _axis_flow(R, pi, moments, k, h):
+    """In place: R <- R Q_k(theta), pi <- Q_k(theta)^T pi, theta = h pi_k / I_k. Q_k turns the plane
+    of the other two axes (i, j) = (k+1, k+2) mod 3, so only two columns of R and two components
+    of pi change; written out because numba's 3x3 products call BLAS (0.6 ms per step at 160 grains)."""
+    theta = h * pi[k] / moments[k]
+    c, s = np.cos(theta), np.sin(theta)
+    i, j = (k + 1) % 3, (k + 2) % 3
+    for a in range(3):
+        ri, rj = R[a, i], R[a, j]
+        R[a, i] = c * ri + s * rj
+        R[a, j] = c * rj - s * ri
+    pi_i, pi_j = pi[i], pi[j]
+    pi[i] = c * pi_i + s * pi_j
+    pi[j] = c * pi_j - s * pi_i
 
 
 @njit(cache=True)
-def _axis_flow(R, pi, moments, k, h):
-    theta = h * pi[k] / moments[k]
-    Q = rotation_about(_AXES[k], theta)
-    return R @ Q, Q.T @ pi
+def _body_momentum(R, L, pi):
+    """pi = R^T L, in place."""
+    for b in range(3):
+        pi[b] = R[0, b] * L[0] + R[1, b] * L[1] + R[2, b] * L[2]
 
 
 @njit(cache=True, parallel=True)
 def free_rotation(rotation, momentum, moments, h):
     """R after h of torque-free motion at world angular momentum L (DLM splitting)."""
-    out = np.empty_like(rotation)
+    out = rotation.copy()
     for g in prange(len(rotation)):
-        R = rotation[g].copy()
-        pi = R.T @ momentum[g]
-        for k, share in ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)):
-            R, pi = _axis_flow(R, pi, moments[g], k, share * h)
-        out[g] = R
+        R = out[g]
+        pi = np.empty(3)
+        _body_momentum(R, momentum[g], pi)
+        _axis_flow(R, pi, moments[g], 0, 0.5 * h)
+        _axis_flow(R, pi, moments[g], 1, 0.5 * h)
+        _axis_flow(R, pi, moments[g], 2, h)
+        _axis_flow(R, pi, moments[g], 1, 0.5 * h)
+        _axis_flow(R, pi, moments[g], 0, 0.5 * h)
     return out
+
+
+@njit(cache=True)
+def _omega(R, L, moments, out):
+    """omega = R I^-1 R^T L, in place."""
+    w0 = (R[0, 0] * L[0] + R[1, 0] * L[1] + R[2, 0] * L[2]) / moments[0]
+    w1 = (R[0, 1] * L[0] + R[1, 1] * L[1] + R[2, 1] * L[2]) / moments[1]
+    w2 = (R[0, 2] * L[0] + R[1, 2] * L[1] + R[2, 2] * L[2]) / moments[2]
+    for a in range(3):
+        out[a] = R[a, 0] * w0 + R[a, 1] * w1 + R[a, 2] * w2
 
 
 @njit(cache=True, parallel=True)
 def angular_velocity(rotation, momentum, moments):
-    """omega = R I^-1 R^T L (world frame)."""
+    """omega = R I^-1 R^T L (world frame) of every grain."""
     out = np.empty_like(momentum)
     for g in prange(len(rotation)):
-        pi = rotation[g].T @ momentum[g]
-        out[g] = rotation[g] @ (pi / moments[g])
+        _omega(rotation[g], momentum[g], moments[g], out[g])
     return out
+
+
+@njit(cache=True, parallel=True)
+def rigid_vertex_motion(centre, rotation, velocity, momentum, moments, body, vertex_ptr):
+    """Vertex positions x_i = c + R X_i and velocities v_c + omega x (x_i - c) of every grain, in
+    one pass (the positions as model.rigid.place_vertices computes them, bit for bit)."""
+    x = np.empty_like(body)
+    v = np.empty_like(body)
+    for g in prange(len(vertex_ptr) - 1):
+        R = rotation[g]
+        w = np.empty(3)
+        _omega(R, momentum[g], moments[g], w)
+        for i in range(vertex_ptr[g], vertex_ptr[g + 1]):
+            for a in range(3):
+                x[i, a] = centre[g, a] + R[a, 0] * body[i, 0] + R[a, 1] * body[i, 1] + R[a, 2] * body[i, 2]
+            r0, r1, r2 = x[i, 0] - centre[g, 0], x[i, 1] - centre[g, 1], x[i, 2] - centre[g, 2]
+            v[i, 0] = velocity[g, 0] + (w[1] * r2 - w[2] * r1)
+            v[i, 1] = velocity[g, 1] + (w[2] * r0 - w[0] * r2)
+            v[i, 2] = velocity[g, 2] + (w[0] * r1 - w[1] * r0)
+    return x, v
 
 
 @njit(cache=True)
@@ -115,11 +161,7 @@ class RigidExplicit(ExplicitIntegrator):
     # ------------------------------------------------------------------ placement <-> vertices
     def vertex_motion(self, centre, rotation, velocity, momentum):
         b = self.bodies
-        x = b.positions(centre, rotation)
-        omega = angular_velocity(rotation, momentum, b.moments)
-        r = x - centre[b.vertex_grain]
-        v = velocity[b.vertex_grain] + np.cross(omega[b.vertex_grain], r)
-        return x, v
+        return rigid_vertex_motion(centre, rotation, velocity, momentum, b.moments, b.body, b.vertex_ptr)
 
     def loads(self, x, v, centre, velocity, momentum, t, history):
         """(F, T, F_d, T_d, contact result) at a placement: force and torque of contact, gravity
