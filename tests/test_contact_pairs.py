@@ -2,7 +2,7 @@
 (test 5), residual and tangent against finite differences of the potential (test 3), broad phase
 against brute force (test 7)."""
 
-from collections import Counter
+from collections import Counter, namedtuple
 
 import ipctk
 import numpy as np
@@ -18,13 +18,25 @@ from vemdem.contact.narrow import (
     PAIR_NAMES,
     VERTEX_EDGE,
     VERTEX_FACE,
+    VERTEX_VERTEX,
     edge_edge_closest,
     pair_weights,
     point_triangle_closest,
 )
-from vemdem.contact.pairs import C0, C1, GAP, NODE0, find_contacts
+from vemdem.contact.pairs import (
+    C0,
+    C1,
+    GAP,
+    NODE0,
+    _ee_gap,
+    _ve_gap,
+    _vertex_edge_survives,
+    _vertex_vertex_survives,
+    _vf_gap,
+    find_contacts,
+)
 from vemdem.contact.topology import CONCAVE, CONVEX, FLAT, build_topology
-from vemdem.geometry import cube, l_prism, rotation_matrix, sand_grain
+from vemdem.geometry import Polyhedron, cube, l_prism, rotation_matrix, sand_grain
 
 GBAR = 0.05
 
@@ -179,6 +191,93 @@ def _place_at_gap(a, b, direction, gap):
         else:
             hi = mid
     return b.translated(hi * direction)
+
+
+def _plank():
+    c = cube(1.0)
+    return Polyhedron(c.vertices * np.array([6.0, 1.0, 0.2]), c.faces)
+
+
+def test_a_cube_off_the_plank_axis_keeps_its_four_corner_pairs():
+    """The narrow phase's slab test runs along the line between the box centres: a cube lying on
+    the end of a long plank is far off it (83 deg from the contact normal) and still rests on
+    four vertex-face pairs at the gap it was put at."""
+    top = cube(0.4, center=(2.5, 0.1, 0.1 + 0.2 + 0.01))
+    counts, _, floats, _ = pairs_of([_plank(), top])
+    assert counts == Counter({"vertex-face": 4})
+    np.testing.assert_allclose(floats[:, GAP], 0.01, rtol=1e-9)
+
+
+def _unculled_pairs(x, A, B, gbar, t):
+    """grain_pair_contacts' loops over every feature pair of grains A and B, without its box and
+    slab culling (the same gap kernels and hierarchy, in the same order): what the culling must
+    leave unchanged. Returns (kind, grain A, grain B, feature A, feature B, gap) rows."""
+    return _unculled(x, A, B, gbar, t.grain_vertex_ptr, t.grain_face_ptr, t.grain_edge_ptr,
+                     _Topo(t.faces, t.edges, t.edge_faces, t.edge_type, t.vertex_face_ptr, t.vertex_faces,
+                           t.vertex_edge_ptr, t.vertex_edges))  # fmt: skip
+
+
+_Topo = namedtuple("_Topo", "faces edges edge_faces edge_type vertex_face_ptr vertex_faces vertex_edge_ptr vertex_edges")
+
+
+@njit(cache=True)
+def _unculled(x, A, B, gbar, vptr, fptr, eptr, t):
+    out = []
+    for side in range(2):
+        ga, gb = (A, B) if side == 0 else (B, A)
+        for p in range(vptr[ga], vptr[ga + 1]):
+            for f in range(fptr[gb], fptr[gb + 1]):
+                d = _vf_gap(x, p, f, t.faces, gbar)[0]
+                if d >= 0.0:
+                    out.append((VERTEX_FACE, ga, gb, p, f, d))
+    for ea in range(eptr[A], eptr[A + 1]):
+        for eb in range(eptr[B], eptr[B + 1]):
+            d = _ee_gap(x, ea, eb, t.edges, t.edge_type, gbar)[0]
+            if d >= 0.0:
+                out.append((EDGE_EDGE, A, B, ea, eb, d))
+    for side in range(2):
+        ga, gb = (A, B) if side == 0 else (B, A)
+        for p in range(vptr[ga], vptr[ga + 1]):
+            for e in range(eptr[gb], eptr[gb + 1]):
+                d = _ve_gap(x, p, e, t.edges, gbar)[0]
+                if d >= 0.0 and _vertex_edge_survives(x, p, e, t.faces, t.edges, t.edge_faces, t.edge_type,
+                                                      t.vertex_edge_ptr, t.vertex_edges, gbar):  # fmt: skip
+                    out.append((VERTEX_EDGE, ga, gb, p, e, d))
+    for p in range(vptr[A], vptr[A + 1]):
+        for q in range(vptr[B], vptr[B + 1]):
+            d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
+            if d <= gbar and _vertex_vertex_survives(x, p, q, t.faces, t.edges, t.vertex_face_ptr, t.vertex_faces,
+                                                     t.vertex_edge_ptr, t.vertex_edges, gbar):  # fmt: skip
+                out.append((VERTEX_VERTEX, A, B, p, q, d))
+    return out
+
+
+def test_culling_keeps_every_pair_of_the_unculled_loops(rng):
+    """The narrow phase culls feature pairs by boxes and by a slab along the line between the
+    grains' box centres (contact/pairs.py); the records must be those of the same loops over
+    every feature pair, in the same order. Sand grains at 0.3 and 0.8 gbar on every side of a long
+    plank (far off that line: up to 80 deg from the contact normal) and against each other;
+    at 1.5 gbar, nothing."""
+    plank = _plank()
+    checked = 0
+    for seed in range(8):
+        b = sand_grain(seed=300 + seed, size=0.8).rotated(rotation_matrix(rng.normal(size=3)))
+        a = plank if seed < 6 else sand_grain(seed=400 + seed, size=1.0)
+        along = rng.uniform(-2.5, 2.5) if seed < 6 else 0.0
+        b = b.translated(np.array([along, 0.0, 0.0]) - b.vertices.mean(axis=0))
+        side = rng.normal(size=3) * np.array([0.2, 1.0, 1.0])
+        direction = side / np.linalg.norm(side)
+        for gap in (0.3 * GBAR, 0.8 * GBAR, 1.5 * GBAR):
+            placed = _place_at_gap(a, b, direction, gap)
+            x, t = scene([a, placed])
+            found, ints, floats, _ = pairs_of([a, placed])
+            reference = _unculled_pairs(x, 0, 1, GBAR, t)
+            assert [tuple(r) for r in ints[:, :5]] == [r[:5] for r in reference]
+            np.testing.assert_array_equal(floats[:, GAP], [r[5] for r in reference])
+            checked += len(reference)
+            if gap < GBAR:
+                assert floats[:, GAP].min() == pytest.approx(gap, rel=1e-6)
+    assert checked >= 8
 
 
 def test_action_equals_reaction_and_no_net_moment(rng):
