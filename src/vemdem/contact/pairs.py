@@ -14,7 +14,8 @@ into the other's box (inflated by the activation gap) are tested pairwise:
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 
-so one physical touching point is counted once. Candidates are found by boxes, not all pairs.
+so one physical touching point is counted once. Candidates are found by boxes and by a slab
+along the line between the grains (below), not all pairs; the records are those of all pairs.
 """
 
 from __future__ import annotations
@@ -401,5 +402,23 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
         if m == 0 or counts.max() <= capacity:
             break
         capacity = int(counts.max())
-    keep = (np.arange(capacity)[None, :] < counts[:, None]).ravel()
-    return ints[keep], floats[keep]
+    return _compact(ints, floats, counts, capacity)
+
+
+@njit(cache=True)
+def _compact(ints, floats, counts, capacity):
+    """The first counts[k] rows of every grain pair's slot k, in order."""
+    n = 0
+    for c in counts:
+        n += c
+    out_i = np.empty((n, ints.shape[1]), dtype=ints.dtype)
+    out_f = np.empty((n, floats.shape[1]))
+    row = 0
+    for k in range(len(counts)):
+        for j in range(k * capacity, k * capacity + counts[k]):
+            for c in range(ints.shape[1]):  # element copies: a row assignment compiles a shape-error path
+                out_i[row, c] = ints[j, c]
+            for c in range(floats.shape[1]):
+                out_f[row, c] = floats[j, c]
+            row += 1
+    return out_i, out_f
