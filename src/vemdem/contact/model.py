@@ -133,8 +133,17 @@ class ContactResult:
     wall_reactions: np.ndarray  # (n_walls, 3) force of the grains on each wall
     trial_history: ContactHistory
     dissipation_power: float  # -F . v of damping and friction at this state (>= 0)
-    pair_force: np.ndarray  # (m, 3) physical force on side A of each pair (normal + damping + friction)
+    local_forces: tuple  # (m, 6, 3) arrays of dPhi/dx at each pair's nodes: normal, then damping + friction
     dissipative: np.ndarray | None = None  # (N, 3) the damping and friction part of `force` (explicit energy books)
+
+    @property
+    def pair_force(self) -> np.ndarray:
+        """(m, 3) physical force on side A of each pair (normal + damping + friction). Summed when
+        asked (frames), not at every step: 0.3 ms of a 6 ms rigid step at 160 grains."""
+        force = force_on_side_a(self.ints, self.local_forces[0])
+        for local in self.local_forces[1:]:
+            force = force + force_on_side_a(self.ints, local)
+        return force
 
     @property
     def n_contacts(self) -> int:
@@ -296,7 +305,7 @@ class ContactModel:
         stick_now, gt_now = stick_prev.copy(), np.zeros((len(ints), 3))
         power = 0.0
         dissipative = np.zeros((self.n_vertices, 3))
-        pair_force = force_on_side_a(ints, conservative.local_force)
+        local_forces = (conservative.local_force,)
         if self.friction.active and len(ints):
             v_all = np.zeros_like(x_all)
             if v is not None:
@@ -311,7 +320,7 @@ class ContactModel:
             residual = residual + extra
             power = float(np.sum(extra * v_all))
             dissipative = extra[: self.n_vertices]
-            pair_force = pair_force + force_on_side_a(ints, local_force)
+            local_forces = (conservative.local_force, local_force)
             if tangent:
                 pair_tangent = pair_tangent + local_tangent
         reactions = self._wall_reactions(residual)
@@ -320,7 +329,7 @@ class ContactModel:
         order = np.argsort(keys, kind="stable")
         trial = ContactHistory(keys[order], trial.c_prev[order], trial.gt[order], trial.stick[order])
         return ContactResult(conservative.total_energy, residual[:N], pair_tangent, ints, floats, reactions, trial, power,
-                             pair_force, dissipative)  # fmt: skip
+                             local_forces, dissipative)  # fmt: skip
 
     def max_wall_speed(self, t: float) -> float:
         return max((float(np.linalg.norm(w.motion.velocity(t))) for w in self.planes + self.meshes), default=0.0)
