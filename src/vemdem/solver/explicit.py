@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.ccd import closing_time, damped_contact_step, grain_speeds, pair_gaps, plane_distances
+from ..contact.ccd import damped_contact_step, grain_speeds, max_pair_speed, pair_gaps, plane_closing_time
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
@@ -134,21 +134,15 @@ class ExplicitIntegrator:
                 limit = f * float(np.min(pair_gaps(floats)[closing] / -rate[closing]))
         pairs = self._candidates["pairs"] if self._candidates is not None else np.zeros((0, 2), np.int64)
         if len(pairs):
-            other = pairs[:, 1]
-            wall = other >= G
-            wall_v = self._mesh_velocities(state.t)
-            c_other = np.where(wall[:, None], wall_v[np.maximum(other - G, 0)] if len(wall_v) else 0.0,
-                               c[np.minimum(other, G - 1)])  # fmt: skip
-            speed = np.linalg.norm(c[pairs[:, 0]] - c_other, axis=1) + r[pairs[:, 0]] + np.where(wall, 0.0, r[np.minimum(other, G - 1)])
-            if speed.max() > 0:  # all at least gbar apart: the fastest enters first
-                limit = min(limit, e * gbar / float(speed.max()))
+            speed = max_pair_speed(c, r, pairs, G, self._mesh_velocities(state.t))
+            if speed > 0:  # all at least gbar apart: the fastest enters first
+                limit = min(limit, e * gbar / speed)
         for plane in scene.contact.planes:
             if not plane.motion.active(state.t):
                 continue
             n = plane.normal
-            dist = plane_distances(state.x, vptr, plane.point_at(state.t), n)
-            speed = np.maximum(-(c @ n) + plane.motion.velocity(state.t) @ n, 0.0) + r
-            limit = min(limit, closing_time(np.maximum(dist, gbar), speed, gbar, e))
+            approach = -(c @ n) + plane.motion.velocity(state.t) @ n
+            limit = min(limit, plane_closing_time(state.x, vptr, plane.point_at(state.t), n, approach, r, gbar, e))
         return limit
 
     def _mesh_velocities(self, t):
