@@ -79,7 +79,8 @@ def measure(cfg: dict, pack, steps: int) -> dict:
     repeats = max(20, steps // 10)
     pieces = {
         "search (broad phase, Verlet skin)": _per_call(lambda: contact.search(x, t, margin=integ.skin), repeats),
-        "narrow phase (find_contacts)": _per_call(lambda: find_contacts(x_all, candidates, contact.topology, gbar), repeats),
+        "narrow phase (find_contacts)": _per_call(
+            lambda: find_contacts(x_all, candidates, contact.topology, gbar), repeats),
         "contact forces (evaluate, narrow phase included)": _per_call(
             lambda: contact.evaluate(x, t, candidates, state.history, v=state.v), repeats),
         "free rotation": _per_call(lambda: free_rotation(s["rotation"], s["momentum"], b.moments, 1e-6), repeats),
@@ -128,7 +129,8 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--config", type=Path, help="a pile_collapse config [the `pile` example]")
     p.add_argument("--state", type=Path, help="a settled pack [settle the config's pack into --out/pack]")
-    p.add_argument("--out", type=Path, default=Path("bench_rigid_out"), help="where a pack is settled [bench_rigid_out]")
+    p.add_argument("--out", type=Path, default=Path("bench_rigid_out"),
+                   help="where a pack is settled [bench_rigid_out]")
     p.add_argument("--steps", type=int, default=1000, help="steps measured [1000]")
     p.add_argument("--threads", type=int, help="numba threads [numba's default]")
     p.add_argument("--json", type=Path, help="save the numbers here")

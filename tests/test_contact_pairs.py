@@ -217,7 +217,9 @@ def _unculled_pairs(x, A, B, gbar, t):
                            t.vertex_edge_ptr, t.vertex_edges))  # fmt: skip
 
 
-_Topo = namedtuple("_Topo", "faces edges edge_faces edge_type vertex_face_ptr vertex_faces vertex_edge_ptr vertex_edges")
+_Topo = namedtuple(
+    "_Topo", "faces edges edge_faces edge_type vertex_face_ptr vertex_faces vertex_edge_ptr vertex_edges"
+)
 
 
 @njit(cache=True)

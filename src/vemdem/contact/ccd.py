@@ -385,7 +385,8 @@ def max_pair_speed(c, r, pairs, n_grains, wall_velocity):
     for k in range(len(pairs)):
         a, o = pairs[k, 0], pairs[k, 1]
         if o >= n_grains:
-            d0, d1, d2 = c[a, 0] - wall_velocity[o - n_grains, 0], c[a, 1] - wall_velocity[o - n_grains, 1], c[a, 2] - wall_velocity[o - n_grains, 2]
+            w = o - n_grains
+            d0, d1, d2 = c[a, 0] - wall_velocity[w, 0], c[a, 1] - wall_velocity[w, 1], c[a, 2] - wall_velocity[w, 2]
             other = 0.0
         else:
             d0, d1, d2 = c[a, 0] - c[o, 0], c[a, 1] - c[o, 1], c[a, 2] - c[o, 2]
@@ -423,9 +424,11 @@ def rigid_pair_inverse_masses(x_all, ints, floats, centre, rotation, mass, momen
             g = ints[c, side]
             if g >= G:
                 continue
+            # r x n and R^T (r x n) written out: numba's np.cross and 3x3 products cost more to
+            # compile and to call than the pair itself
             r0, r1, r2 = p[0] - centre[g, 0], p[1] - centre[g, 1], p[2] - centre[g, 2]
-            q0, q1, q2 = r1 * n2 - r2 * n1, r2 * n0 - r0 * n2, r0 * n1 - r1 * n0  # r x n, written out: numba's
-            inv = 1.0 / mass[g]  # np.cross and 3x3 products cost more to compile and to call than the pair
+            q0, q1, q2 = r1 * n2 - r2 * n1, r2 * n0 - r0 * n2, r0 * n1 - r1 * n0
+            inv = 1.0 / mass[g]
             for k in range(3):
                 b = rotation[g, 0, k] * q0 + rotation[g, 1, k] * q1 + rotation[g, 2, k] * q2  # (R^T (r x n))_k
                 inv += b * b / moments[g, k]
