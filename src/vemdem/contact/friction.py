@@ -104,7 +104,11 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     """Damping and friction residual (dPhi/dx sign: minus the force) of one pair into out (6, 3).
 
     xs: node positions (real or complex); velocities v = v0 + a4 (xs - x0). Returns
-    (stick, slip_magnitude_limit_hit, g_t to store) evaluated on the real parts."""
+    (stick, slip_magnitude_limit_hit, g_t to store) evaluated on the real parts.
+
+    Written on scalar components (the same operations in the same order as the vector form
+    g = sum w_i x_i, n = g / |g|, ...): numba puts every 3-vector temporary on the heap, and
+    those allocations were most of this kernel's 2 us per pair."""
     nn = N_NODES[kind]
     w0 = np.empty(6)
     D = np.empty((6, 2))
@@ -113,53 +117,66 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     w = np.zeros(6, dtype=xs.dtype)
     for i in range(6):
         w[i] = w0[i] + D[i, 0] * c0 + D[i, 1] * c1
-    g = np.zeros(3, dtype=xs.dtype)
-    vrel = np.zeros(3, dtype=xs.dtype)
+    zero = 0.0 * xs[0, 0]
+    g0, g1, g2 = zero, zero, zero  # gap vector sum w_i x_i
+    r0, r1, r2 = zero, zero, zero  # relative velocity sum w_i v_i
     for i in range(nn):
-        vi = v0[i] + a4 * (xs[i] - x0[i])
-        g += w[i] * xs[i]
-        vrel += w[i] * vi
-    d = np.sqrt(np.sum(g * g))
-    n = g / d
+        g0 += w[i] * xs[i, 0]
+        g1 += w[i] * xs[i, 1]
+        g2 += w[i] * xs[i, 2]
+        r0 += w[i] * (v0[i, 0] + a4 * (xs[i, 0] - x0[i, 0]))
+        r1 += w[i] * (v0[i, 1] + a4 * (xs[i, 1] - x0[i, 1]))
+        r2 += w[i] * (v0[i, 2] + a4 * (xs[i, 2] - x0[i, 2]))
+    d = np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    n0, n1, n2 = g0 / d, g1 / d, g2 / d
     fn, k = normal_force(d, law)
-    gn_dot = np.sum(n * vrel)
+    gn_dot = n0 * r0 + n1 * r1 + n2 * r2
     c_n = 2.0 * fr[ZETA] * np.sqrt(k * m_eq)
     f_damp = -c_n * gn_dot
     if (fn + f_damp).real < 0.0:
         f_damp = -fn
     f_normal = fn + f_damp
-    gt = np.zeros(3, dtype=xs.dtype)
+    t0, t1, t2 = zero, zero, zero  # g_t: the tangential slip since the pair's stick point
     if was_active:
-        wp = pair_weights(kind, c_prev[0], c_prev[1], np.empty(6), np.empty((6, 2)))  # material points of c_prev
-        a = np.zeros(3, dtype=xs.dtype)
+        wp = pair_weights(kind, c_prev[0], c_prev[1], w0, D)  # material points of c_prev
+        a0, a1, a2 = zero, zero, zero
         for i in range(nn):
-            a += wp[i] * xs[i]
-        a += gt_prev
-        gt = a - np.sum(n * a) * n
-    vt = vrel - gn_dot * n
-    f_try = fr[EPS_T] * gt + fr[C_T] * vt
+            a0 += wp[i] * xs[i, 0]
+            a1 += wp[i] * xs[i, 1]
+            a2 += wp[i] * xs[i, 2]
+        a0, a1, a2 = a0 + gt_prev[0], a1 + gt_prev[1], a2 + gt_prev[2]
+        na = n0 * a0 + n1 * a1 + n2 * a2
+        t0, t1, t2 = a0 - na * n0, a1 - na * n1, a2 - na * n2
+    vt0, vt1, vt2 = r0 - gn_dot * n0, r1 - gn_dot * n1, r2 - gn_dot * n2
+    f0 = fr[EPS_T] * t0 + fr[C_T] * vt0
+    f1 = fr[EPS_T] * t1 + fr[C_T] * vt1
+    f2 = fr[EPS_T] * t2 + fr[C_T] * vt2
     mu = fr[MU_S] if was_stick else fr[MU_D]
-    f_try_norm = np.sqrt(np.sum(f_try * f_try))
+    f_try_norm = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
     stick = f_try_norm.real <= mu * f_normal.real
-    if stick:
-        ft = f_try
-    else:
-        ft = fr[MU_D] * f_normal * f_try / f_try_norm
-    force_on_a = f_damp * n - ft
+    if not stick:
+        f0 = fr[MU_D] * f_normal * f0 / f_try_norm
+        f1 = fr[MU_D] * f_normal * f1 / f_try_norm
+        f2 = fr[MU_D] * f_normal * f2 / f_try_norm
+    fa0, fa1, fa2 = f_damp * n0 - f0, f_damp * n1 - f1, f_damp * n2 - f2  # force on side A
     for i in range(6):
-        for a in range(3):
-            out[i, a] = -w[i] * force_on_a[a] if i < nn else 0.0
+        if i < nn:
+            out[i, 0] = -w[i] * fa0
+            out[i, 1] = -w[i] * fa1
+            out[i, 2] = -w[i] * fa2
+        else:
+            for a in range(3):
+                out[i, a] = 0.0
     # history to store if this state converges (return map on the elastic part)
-    elastic = fr[EPS_T] * gt
-    elastic_norm = np.sqrt(np.sum(elastic * elastic)).real
+    e0, e1, e2 = fr[EPS_T] * t0, fr[EPS_T] * t1, fr[EPS_T] * t2
+    elastic_norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2).real
     store = np.empty(3)
     limit = mu * f_normal.real
-    for a in range(3):
-        store[a] = gt[a].real
+    store[0], store[1], store[2] = t0.real, t1.real, t2.real
     if elastic_norm > limit and elastic_norm > 0.0:
         scale = fr[MU_D] * f_normal.real / elastic_norm
         for a in range(3):
-            store[a] = gt[a].real * scale
+            store[a] = store[a] * scale
     return stick, store
 
 
