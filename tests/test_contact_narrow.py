@@ -14,6 +14,7 @@ from vemdem.contact.narrow import (
     edge_edge_closest,
     edge_edge_lcp,
     gap_derivatives,
+    gap_gradient,
     point_triangle_closest,
     vertex_edge_lcp,
     vertex_face_lcp,
@@ -125,4 +126,7 @@ def test_gap_derivatives_include_the_moving_contact_point(kind, rng):
             fd_hess[:, k] = (gp[:nn] - gm[:nn]).ravel() / (2 * h)
         assert d > 0
         np.testing.assert_allclose(grad[:nn].ravel(), fd_grad, atol=1e-7)
+        only = np.zeros((6, 3))  # the explicit steps' gradient-only kernel: the same numbers
+        assert gap_gradient(kind, xs, *_lcp(kind, xs), only) == d
+        np.testing.assert_array_equal(only, grad)
         np.testing.assert_allclose(hess, fd_hess, atol=1e-6 * max(1.0, np.abs(hess).max()))

@@ -17,32 +17,59 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .law import normal_force, normal_potential
-from .narrow import EDGE_EDGE, N_NODES, gap_derivatives, pair_weights
+from .narrow import EDGE_EDGE, N_NODES, gap_derivatives, gap_gradient, pair_weights
 from .pairs import C0, C1, KIND, NODE0
 
 
+@njit(cache=True)
+def _pair_nodes(x, ints, c, nn):
+    """The positions of pair c's nodes, (6, 3), zero-padded."""
+    xs = np.zeros((6, 3))
+    for i in range(nn):
+        for a in range(3):
+            xs[i, a] = x[ints[c, NODE0 + i], a]
+    return xs
+
+
+@njit(cache=True)
+def _normal_terms(c, nn, d, grad, law, energy, local_force):
+    """Phi(d) and -f_n(d) grad d of pair c into energy[c] and local_force[c]; returns (f_n, k)."""
+    fn, k = normal_force(d, law)
+    energy[c] = normal_potential(d, law)
+    for i in range(nn):
+        for a in range(3):
+            local_force[c, i, a] = -fn * grad[i, a]
+    return fn, k
+
+
 @njit(parallel=True, cache=True)
-def _local_terms(x, ints, floats, law, want_tangent, energy, local_force, local_tangent):
+def _local_forces(x, ints, floats, law, energy, local_force):
+    """_local_terms without the tangent (explicit steps): numba compiles every branch of a
+    kernel, and the tangent's would cost a fresh install's first explicit run seconds."""
     for c in prange(len(ints)):
         kind = ints[c, KIND]
         nn = N_NODES[kind]
-        xs = np.zeros((6, 3))
-        for i in range(nn):
-            for a in range(3):
-                xs[i, a] = x[ints[c, NODE0 + i], a]
+        xs = _pair_nodes(x, ints, c, nn)
+        grad = np.zeros((6, 3))
+        d = gap_gradient(kind, xs, floats[c, C0], floats[c, C1], grad)
+        _normal_terms(c, nn, d, grad, law, energy, local_force)
+
+
+@njit(parallel=True, cache=True)
+def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
+    """Energy, force and 18 x 18 tangent of every pair (implicit steps)."""
+    for c in prange(len(ints)):
+        kind = ints[c, KIND]
+        nn = N_NODES[kind]
+        xs = _pair_nodes(x, ints, c, nn)
         grad = np.zeros((6, 3))
         hess = np.zeros((3 * nn, 3 * nn))
-        d = gap_derivatives(kind, xs, floats[c, C0], floats[c, C1], want_tangent, grad, hess)
-        fn, k = normal_force(d, law)
-        energy[c] = normal_potential(d, law)
-        for i in range(nn):
-            for a in range(3):
-                local_force[c, i, a] = -fn * grad[i, a]
-        if want_tangent:
-            for r in range(3 * nn):
-                gr = grad[r // 3, r % 3]
-                for s in range(3 * nn):
-                    local_tangent[c, r, s] = k * gr * grad[s // 3, s % 3] - fn * hess[r, s]
+        d = gap_derivatives(kind, xs, floats[c, C0], floats[c, C1], True, grad, hess)
+        fn, k = _normal_terms(c, nn, d, grad, law, energy, local_force)
+        for r in range(3 * nn):
+            gr = grad[r // 3, r % 3]
+            for s in range(3 * nn):
+                local_tangent[c, r, s] = k * gr * grad[s // 3, s % 3] - fn * hess[r, s]
 
 
 @njit(cache=True)
@@ -129,7 +156,10 @@ def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: boo
     energy = np.zeros(m)
     local_force = np.zeros((m, 6, 3))
     local_tangent = np.zeros((m, 18, 18)) if tangent else np.zeros((1, 18, 18))
-    _local_terms(np.ascontiguousarray(x), ints, floats, law_params, tangent, energy, local_force, local_tangent)
+    if tangent:
+        _local_terms(np.ascontiguousarray(x), ints, floats, law_params, energy, local_force, local_tangent)
+    else:
+        _local_forces(np.ascontiguousarray(x), ints, floats, law_params, energy, local_force)
     force = np.zeros((n_vertices, 3))
     scatter_local_forces(ints, local_force, force)
     return ContactEvaluation(energy, force, local_force, local_tangent if tangent else None, ints)

@@ -147,6 +147,33 @@ def pair_weights(kind, c0, c1, w0, D):
 
 
 @njit(cache=True)
+def _gap_and_gradient(kind, xs, c0, c1, w0, D, grad):
+    """(w, g, d): the pair's weights at (c0, c1), its gap vector g = sum w_i x_i and d = |g|; grad
+    d = n (x) w into grad (zeros when d = 0)."""
+    nn = N_NODES[kind]
+    w = pair_weights(kind, c0, c1, w0, D)
+    g = np.zeros(3)
+    for i in range(nn):
+        for a in range(3):
+            g[a] += w[i] * xs[i, a]
+    d = np.sqrt(_dot(g, g))
+    grad[:, :] = 0.0
+    if not d <= 0.0:  # a NaN gap fills grad with NaN, as before: never a silent zero
+        for i in range(nn):
+            for a in range(3):
+                grad[i, a] = w[i] * g[a] / d
+    return w, g, d
+
+
+@njit(cache=True)
+def gap_gradient(kind, xs, c0, c1, grad):
+    """gap_derivatives without the Hessian: explicit steps compile only this (no LCP Schur
+    complement, no matrix inverse: seconds of a fresh install's first run)."""
+    d = _gap_and_gradient(kind, xs, c0, c1, np.empty(6), np.empty((6, 2)), grad)[2]
+    return 0.0 if d <= 0.0 else d
+
+
+@njit(cache=True)
 def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
     """Gap d = |g| of an in-range pair and its exact derivatives in the pair's node positions.
 
@@ -161,18 +188,9 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
     m = N_COORDS[kind]
     w0 = np.empty(6)
     D = np.empty((6, 2))
-    w = pair_weights(kind, c0, c1, w0, D)
-    g = np.zeros(3)
-    for i in range(nn):
-        for a in range(3):
-            g[a] += w[i] * xs[i, a]
-    d = np.sqrt(_dot(g, g))
-    grad[:, :] = 0.0
+    w, g, d = _gap_and_gradient(kind, xs, c0, c1, w0, D, grad)
     if d <= 0.0:
         return 0.0
-    for i in range(nn):
-        for a in range(3):
-            grad[i, a] = w[i] * g[a] / d
     if not want_hessian:
         return d
     n3 = 3 * nn
