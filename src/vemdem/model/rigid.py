@@ -22,7 +22,14 @@ from ..vem.element import Evaluation, VemOptions, build_elements
 from ..vem.mass import build_mass
 from ..vem.material import Material
 
-__all__ = ["RigidBodies", "fit_rigid", "place_vertices"]
+__all__ = ["RigidBodies", "fit_rigid", "place_vertex", "place_vertices"]
+
+
+@njit(cache=True)
+def place_vertex(x, i, centre, rotation, body, g):
+    """x_i = c_g + R_g X_i, into row i of x."""
+    for a in range(3):
+        x[i, a] = centre[g, a] + rotation[g, a, 0] * body[i, 0] + rotation[g, a, 1] * body[i, 1] + rotation[g, a, 2] * body[i, 2]
 
 
 @njit(cache=True, parallel=True)
@@ -30,9 +37,7 @@ def place_vertices(centre, rotation, body, vertex_grain):
     """x_i = c_g + R_g X_i for every vertex."""
     x = np.empty_like(body)
     for i in prange(len(body)):
-        g = vertex_grain[i]
-        for a in range(3):
-            x[i, a] = centre[g, a] + rotation[g, a, 0] * body[i, 0] + rotation[g, a, 1] * body[i, 1] + rotation[g, a, 2] * body[i, 2]
+        place_vertex(x, i, centre, rotation, body, vertex_grain[i])
     return x
 
 

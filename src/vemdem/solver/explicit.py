@@ -31,7 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact.ccd import damped_contact_step, grain_speeds, max_pair_speed, pair_gaps, plane_closing_time
+from ..contact.ccd import (
+    damped_contact_step,
+    grain_speeds,
+    max_pair_speed,
+    pair_gaps,
+    plane_closing_time,
+    plane_distances,
+)
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
@@ -141,8 +148,9 @@ class ExplicitIntegrator:
             if not plane.motion.active(state.t):
                 continue
             n = plane.normal
+            dist = plane_distances(state.x, vptr, plane.point_at(state.t), n)
             approach = -(c @ n) + plane.motion.velocity(state.t) @ n
-            limit = min(limit, plane_closing_time(state.x, vptr, plane.point_at(state.t), n, approach, r, gbar, e))
+            limit = min(limit, plane_closing_time(dist, approach, r, gbar, e))
         return limit
 
     def _mesh_velocities(self, t):

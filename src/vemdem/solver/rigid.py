@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from ..contact.ccd import damped_pair_step, rigid_pair_inverse_masses
 from ..contact.model import PenetrationError
-from ..model.rigid import RigidBodies, fit_rigid
+from ..model.rigid import RigidBodies, fit_rigid, place_vertex
 from ..model.scene import Scene
 from .explicit import ExplicitIntegrator, ExplicitParameters
 from .state import State, StepInfo, StepRejected
@@ -94,17 +94,15 @@ def angular_velocity(rotation, momentum, moments):
 
 @njit(cache=True, parallel=True)
 def rigid_vertex_motion(centre, rotation, velocity, momentum, moments, body, vertex_ptr):
-    """Vertex positions x_i = c + R X_i and velocities v_c + omega x (x_i - c) of every grain, in
-    one pass (the positions as model.rigid.place_vertices computes them, bit for bit)."""
+    """Vertex positions x_i = c + R X_i (model.rigid.place_vertex) and velocities
+    v_c + omega x (x_i - c) of every grain, in one pass."""
     x = np.empty_like(body)
     v = np.empty_like(body)
     for g in prange(len(vertex_ptr) - 1):
-        R = rotation[g]
         w = np.empty(3)
-        _omega(R, momentum[g], moments[g], w)
+        _omega(rotation[g], momentum[g], moments[g], w)
         for i in range(vertex_ptr[g], vertex_ptr[g + 1]):
-            for a in range(3):
-                x[i, a] = centre[g, a] + R[a, 0] * body[i, 0] + R[a, 1] * body[i, 1] + R[a, 2] * body[i, 2]
+            place_vertex(x, i, centre, rotation, body, g)
             r0, r1, r2 = x[i, 0] - centre[g, 0], x[i, 1] - centre[g, 1], x[i, 2] - centre[g, 2]
             v[i, 0] = velocity[g, 0] + (w[1] * r2 - w[2] * r1)
             v[i, 1] = velocity[g, 1] + (w[2] * r0 - w[0] * r2)
