@@ -218,3 +218,40 @@ def test_auto_hands_a_failed_system_to_the_direct_solver(monkeypatch, failure):
     x = solver.solve(b, 1e-10)
     assert solver.stats.fallbacks == 1
     np.testing.assert_allclose(x, spla.spsolve(K.tocsc(), b), rtol=0, atol=1e-9 * np.abs(x).max())
+
+
+def test_auto_holds_the_direct_solver_after_a_hand_over_and_tries_grain_block_again(monkeypatch):
+    """A failed grain-block solve costs GMRES its whole budget; the systems after it are alike (a
+    jammed pack stays jammed), so auto sends the next HOLD systems straight to the direct solver,
+    doubles the hold while the grain-block path keeps failing, and resets it once it succeeds.
+    Every answer is the direct solution."""
+    import vemdem.solver.linear as linear
+
+    monkeypatch.setattr(linear, "DENSE_LIMIT", 0)
+    system = real_system()
+    K = system.to_csr()
+    b = np.random.default_rng(7).normal(size=system.n)
+    exact = spla.spsolve(K.tocsc(), b)
+    solver = make_linear_solver("auto")
+    solver.block.max_iterations = 1  # GMRES fails on every system
+
+    def run(n):
+        for _ in range(n):
+            solver.factor(system)
+            x = solver.solve(b, 1e-10)
+            np.testing.assert_allclose(x, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+
+    run(1)
+    assert (solver.stats.fallbacks, solver.stats.held) == (1, 0)
+    run(solver.HOLD)  # held: no grain-block attempt
+    assert (solver.stats.fallbacks, solver.stats.held) == (1, solver.HOLD)
+    run(1)  # tried again, fails again: the hold doubles
+    assert (solver.stats.fallbacks, solver.stats.held) == (2, solver.HOLD)
+    run(2 * solver.HOLD)
+    assert (solver.stats.fallbacks, solver.stats.held) == (2, 3 * solver.HOLD)
+    solver.block.max_iterations = 200  # the pack unjams: grain-block succeeds and the hold resets
+    run(1)
+    assert solver._current is solver.block and solver.stats.fallbacks == 2
+    solver.block.max_iterations = 1
+    run(1 + solver.HOLD + 1)
+    assert (solver.stats.fallbacks, solver.stats.held) == (4, 4 * solver.HOLD)

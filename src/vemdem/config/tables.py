@@ -27,6 +27,7 @@ from .schema import (
 SHAPES = ("cube", "tetrahedron", "l-prism", "random", "file")
 INTEGRATORS = ("implicit", "explicit")
 LINEAR_SOLVERS = ("auto", "direct", "grain-block")
+PREDICTORS = ("rigid", "acceleration", "rest")
 BODY_MODELS = ("flexible",)
 MAX_FRAMES = 100_000  # more frames than this is a typo in output.every, not a wish
 
@@ -121,6 +122,10 @@ CONTACT = {
 SOLVER = {
     "integrator": Field(INTEGRATORS, "implicit", doc="implicit Newmark or explicit central differences"),
     "linear": Field(LINEAR_SOLVERS, "auto", doc="implicit: linear solver of the Newton systems (docs/linear-solvers.md)"),
+    "predictor": Field(PREDICTORS, "rigid",
+                       doc="implicit, flexible grains: Newton's first iterate: each grain's rigid part of the "
+                           "constant-acceleration motion, all of it, or the step's start (runs before session 11: "
+                           "rest; docs/dynamics.md)"),
     # gamma 0.6 with beta (gamma + 1/2)^2 / 4: numerical damping of the unresolved contact and
     # element modes. With gamma 0.5 a grain at rest on a slope crept (0.15 grain sizes/s at 0.8 of
     # the friction angle) and Newton took 9 iterations per step; with 0.6 it stays (docs/dynamics.md)

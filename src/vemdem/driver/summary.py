@@ -63,6 +63,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_krylov_iterations": stats.krylov_iterations,
         "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
         "newton_iterations_per_simulated_second": stats.newton_iterations / state.t if state.t > 0 else 0.0,
+        "linear_solver": _linear(run.integrator),
         "n_energy_gain_steps": stats.energy_gains,  # implicit: tiny steps accepted although the energy grew
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
@@ -76,6 +77,18 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
             "damping_ratio": scene.contact.friction.damping_ratio,
         },
     }
+
+
+def _linear(integrator) -> dict | None:
+    """Counters of the implicit flexible integrator's linear solver (None for the others)."""
+    stats = getattr(integrator, "linear_stats", None)
+    if stats is None:
+        return None
+    return {"factorisations": stats.factorisations, "krylov_iterations": stats.iterations,
+            # auto: systems handed to the direct solver after GMRES failed, and those sent there
+            # straight after a hand-over (solver/linear/__init__.py AutoSolver)
+            "fallbacks": stats.fallbacks, "held": getattr(stats, "held", 0),
+            "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
 
 
 def _books(scene: Scene, run: Run) -> dict | None:

@@ -16,7 +16,7 @@ from ..model.scene import Scene
 from .explicit import ExplicitIntegrator, ExplicitParameters, advance_explicit, explicit_initial_state
 from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
-from .newmark import NewmarkParameters, advance, initial_state
+from .newmark import PREDICTORS, NewmarkParameters, advance, initial_state
 from .rigid import RigidExplicit
 from .rigid_implicit import RigidNewmark
 from .state import RunStats, State, StepControl
@@ -41,12 +41,15 @@ class SolverOptions:
     safety: float = 0.5
     mass_damping: float = 0.0
     linear: str = "auto"  # implicit: linear solver of the Newton systems (solver/linear/)
+    predictor: str = "rigid"  # implicit flexible: Newton's first iterate (solver/newmark.py NewmarkParameters)
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if self.linear not in LINEAR_SOLVERS:
             raise ValueError(f"linear must be one of {LINEAR_SOLVERS}, got {self.linear!r}")
+        if self.predictor not in PREDICTORS:
+            raise ValueError(f"predictor must be one of {PREDICTORS}, got {self.predictor!r}")
 
 
 class Integrator(Protocol):
@@ -69,8 +72,14 @@ class ImplicitNewmark:
         self.scene = scene
         self.control = _control(options)
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
-                                        mass_damping=options.mass_damping,
+                                        mass_damping=options.mass_damping, predictor=options.predictor,
                                         linear=make_linear_solver(options.linear))  # fmt: skip
+
+    @property
+    def linear_stats(self):
+        """The linear solver's counters (factorisations, Krylov iterations, hand-overs) since this
+        process built the integrator: a resumed run counts from its restart."""
+        return self.params.linear.stats
 
     def initial_state(self, x0=None, v0=None, history=None) -> State:
         return initial_state(self.scene, x0=x0, v0=v0, history=history)

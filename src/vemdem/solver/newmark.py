@@ -38,7 +38,9 @@ from ..model.scene import Scene
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
-__all__ = ["NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
+PREDICTORS = ("rigid", "acceleration", "rest")
+
+__all__ = ["PREDICTORS", "NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
 
 
 @dataclass
@@ -50,7 +52,10 @@ class NewmarkParameters:
     max_iterations: int = 15
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
-    predictor: str = "rest"  # first iterate: "rest" (x_n), "acceleration" (x_n + dt v_n + dt^2/2 a_n) or "rigid" (its rigid part per grain), CCD-bounded
+    # first iterate: "rigid" (each grain's rigid part of x_n + dt v_n + dt^2/2 a_n), "acceleration"
+    # (all of it) or "rest" (x_n), CCD-bounded. "rigid" since session 11: a quarter fewer Newton
+    # iterations and 15 % less wall time on the 515-grain collapse at the real density (docs/dynamics.md)
+    predictor: str = "rigid"
     linear: object = None  # a solver.linear LinearSolver, made once per run (None: "auto")
     krylov_rtol: float = 1e-8  # relative residual of iterative linear solves (inexact Newton)
     line_search: bool = False  # backtrack on the incremental potential (IPC's merit) while the update is large

@@ -32,18 +32,31 @@ class AutoSolver:
     hands a system to the direct solver when the grain-block path fails on it: a coarse matrix
     too ill-conditioned to factor, or GMRES not reaching its tolerance. Both were seen under a lid
     at the real density, where contacts at nanometre gaps are 1e2-1e3 times stiffer than the
-    grains (docs/linear-solvers.md); the direct solve does not depend on that ratio."""
+    grains (docs/linear-solvers.md); the direct solve does not depend on that ratio.
+
+    A failure is followed by like systems (a jammed pack stays jammed for many Newton iterations),
+    and each costs GMRES its whole iteration budget before the direct solve: after a hand-over the
+    next `hold` systems go straight to the direct solver. The hold doubles while the grain-block
+    path keeps failing when tried again (up to MAX_HOLD) and falls back to HOLD when it succeeds."""
 
     name = "auto"
+    HOLD = 4
+    MAX_HOLD = 256
 
     def __init__(self):
         self.direct, self.block = DirectSolver(), GrainBlockSolver()
         self.stats = self.block.stats
         self._current = self.block
+        self._hold, self._skip = self.HOLD, 0
 
     def factor(self, system: NewtonSystem) -> None:
         self._system = system
-        self._current = self.block if system.n > DENSE_LIMIT and system.n_bodies > 1 else self.direct
+        iterative = system.n > DENSE_LIMIT and system.n_bodies > 1
+        if iterative and self._skip > 0:
+            self._skip -= 1
+            self.stats.held += 1
+            iterative = False
+        self._current = self.block if iterative else self.direct
         try:
             self._current.factor(system)
         except SingularSystemError:
@@ -53,14 +66,20 @@ class AutoSolver:
             self._fall_back()
 
     def solve(self, rhs, rtol: float = 1e-10):
+        if self._current is self.direct:
+            self.stats.last_iterations = 0
+            return self.direct.solve(rhs, rtol)
         try:
-            return self._current.solve(rhs, rtol)
+            x = self._current.solve(rhs, rtol)
         except LinearSolveDiverged:
             self._fall_back()
             return self.direct.solve(rhs, rtol)
+        self._hold = self.HOLD
+        return x
 
     def _fall_back(self) -> None:
         self.stats.fallbacks += 1
+        self._skip, self._hold = self._hold, min(2 * self._hold, self.MAX_HOLD)
         self._current = self.direct
         self.direct.factor(self._system)
 

@@ -30,15 +30,20 @@ class LinearSolveDiverged(np.linalg.LinAlgError):
     """An iterative solve did not reach its tolerance: str(e) gives the residual and iterations."""
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _block_matvec(blocks, block_ptr, dof_ptr, u, out):
+    # fastmath lets the row sums vectorise (reassociated): 3.9 -> 1.8 ms for 515 blocks of 90 x 90
+    # on one thread, the same to 4e-16 (docs/linear-solvers.md)
     for g in prange(len(dof_ptr) - 1):
         d0, n = dof_ptr[g], dof_ptr[g + 1] - dof_ptr[g]
         b0 = block_ptr[g]
+        A = blocks[b0 : b0 + n * n].reshape(n, n)
+        x = u[d0 : d0 + n]
         for i in range(n):
+            row = A[i]
             s = 0.0
             for j in range(n):
-                s += blocks[b0 + i * n + j] * u[d0 + j]
+                s += row[j] * x[j]
             out[d0 + i] = s
 
 
@@ -106,6 +111,7 @@ class SolverStats:
     iterations: int = 0  # Krylov iterations, all solves
     last_iterations: int = 0
     fallbacks: int = 0  # auto: systems handed to the direct solver after the iterative one failed
+    held: int = 0  # auto: systems sent straight to the direct solver after a hand-over (AutoSolver)
 
 
 class LinearSolver(Protocol):
