@@ -139,6 +139,12 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
     nodes = (x_all, len(path.x), contact.plane_node0, path.dx, contact.topology.vertex_grain, path.c, path.t,
              path.phi, path.excess)  # fmt: skip
     if update_reach(np.zeros((len(moved), 3)), moved) + D <= margin:
+        if 2.0 * D < params.ccd_fraction * gbar:
+            # A pair farther than gbar cannot close by ccd_fraction of its distance when D is this
+            # small, so the pairs within gbar, found at this x and t for the forces (ints), are all
+            # the update can bind: the search for gbar + D would only add pairs that give alpha = 1.
+            # Most iterations after the first qualify (one narrow phase per iteration instead of two).
+            return accd_alpha(ints, *nodes, keep, 1.0) if len(ints) else 1.0
         _, near, _ = contact.pairs(path.x, t, candidates, reach=gbar + D)
         return accd_alpha(near, *nodes, keep, 1.0) if len(near) else 1.0
     none = ints[:0], floats[:0]  # the pairs within the layer are left to the additive CCD below
