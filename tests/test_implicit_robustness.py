@@ -149,3 +149,23 @@ def test_wall_time_keeps_the_share_of_the_gap():
     assert 0 < t < 1e-3 and speeding.contact.planes[0].motion.displacement(t)[2] >= -share * d
     receding = scene_with((0.0, 1.0), (0.0, -v))
     assert wall_time(receding, x, 0.0, 1e-3, share) == 1e-3
+
+
+@pytest.mark.parametrize("table, expected", [({}, "rigid"), ({"predictor": "rest"}, "rest")])
+def test_the_predictor_key_reaches_newton(table, expected):
+    """`[solver] predictor` (default "rigid" since session 11) is what the implicit integrator's Newton
+    starts from; "rest" reproduces the runs made before it. A name outside the list is refused."""
+    from vemdem.config.build import solver_options_from
+    from vemdem.config.schema import ConfigError
+    from vemdem.scenarios.registry import checked_config
+    from vemdem.solver.api import ImplicitNewmark
+
+    import tomllib
+    from importlib.resources import files
+
+    raw = tomllib.loads(files("vemdem.examples").joinpath("drop.toml").read_text())
+    raw["solver"] = {"integrator": "implicit", **table}
+    options = solver_options_from(checked_config(raw)[0])
+    assert ImplicitNewmark(None, options).params.predictor == expected  # the scene plays no part here
+    with pytest.raises(ConfigError, match="predictor"):
+        checked_config({**raw, "solver": {"predictor": "guess"}})

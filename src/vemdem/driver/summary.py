@@ -87,7 +87,7 @@ def _linear(integrator) -> dict | None:
     return {"factorisations": stats.factorisations, "krylov_iterations": stats.iterations,
             # auto: systems handed to the direct solver after GMRES failed, and those sent there
             # straight after a hand-over (solver/linear/__init__.py AutoSolver)
-            "fallbacks": stats.fallbacks, "held": getattr(stats, "held", 0),
+            "fallbacks": stats.fallbacks, "held": stats.held,
             "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
 
 
