@@ -108,3 +108,16 @@ def test_a_broken_rule_is_caught(tmp_path, monkeypatch, source, module, expected
     path.write_text(source + path.read_text())
     monkeypatch.setattr(__import__(__name__), "SRC", copy)
     assert expected in _violations()
+
+
+def test_the_value_lists_config_tables_repeats_agree_with_their_owners():
+    """config/tables.py may not import solver/ (FORBIDDEN above), so it repeats the names the solver
+    room owns: integrators, linear solvers, Newton predictors. A name added on one side only would
+    be refused by the config check or accepted there and refused by SolverOptions."""
+    from vemdem.config import tables
+    from vemdem.solver import api, newmark
+    from vemdem.solver.linear import NAMES
+
+    assert tables.INTEGRATORS == api.INTEGRATORS
+    assert tables.LINEAR_SOLVERS == NAMES
+    assert tables.PREDICTORS == newmark.PREDICTORS
