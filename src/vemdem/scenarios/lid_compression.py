@@ -42,7 +42,9 @@ def lid_wall(lid: dict, centre) -> tuple[PlaneWall, float]:
 
 
 def lid_curve(walls_csv: Path, lid: PlaneWall, start: float, turn: float):
-    """(phase, strain, force) of every frame, from the lid's rows of walls.csv."""
+    """(phase, strain, force) of every frame, from the lid's rows of walls.csv: the one record
+    that holds every frame of a run resumed from a checkpoint (the loop truncates it to the
+    checkpoint's frame and appends), where frames kept in memory would start at the resume."""
     times, force = [], []
     with walls_csv.open() as fh:
         for row in csv.DictReader(fh):
