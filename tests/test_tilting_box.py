@@ -3,7 +3,8 @@
 References: the surface fit against planes of known angle; a cube on the box's floor against
 the closed form of a block on a slope whose tilt grows at a constant rate (with mu_s = mu_d it
 breaks away at atan(mu), then v(t) = g sqrt(1 + mu^2) omega t^2 / 2, so the kinetic threshold
-is passed a known time later); resume against an uninterrupted run; energy after the
+is passed a known time later, and its slip x(t) = g sqrt(1 + mu^2) omega t^3 / 6 reaches the
+surface mark's slip a known time later); resume against an uninterrupted run; energy after the
 avalanche, when gravity no longer turns, against the balance of a closed system."""
 
 import json
@@ -68,10 +69,11 @@ def _cube_state(path, mass_scaling):
     return path
 
 
-def _cube_config(state, mu, integrator="explicit", mass_scaling=1e6, rate=10.0, threshold=1e-3):
+def _cube_config(state, mu, integrator="explicit", mass_scaling=1e6, rate=10.0, threshold=1e-3, **tilt):
     start = round(math.degrees(math.atan(mu)) - 3.0, 2)
     cfg, module = checked_config({"scenario": "tilting_box", "initial_state": str(state),
-                                  "tilt": {"start": start, "rate": rate, "max": 45.0, "avalanche_kinetic": threshold},
+                                  "tilt": {"start": start, "rate": rate, "max": 45.0, "avalanche_kinetic": threshold,
+                                           **tilt},
                                   "contact": {"mu_s": mu, "mu_d": mu},
                                   "solver": {"integrator": integrator, "mass_scaling": mass_scaling},
                                   "output": {"vtk": False, "every": 2e-3}})  # fmt: skip
@@ -102,6 +104,34 @@ def test_a_cube_slides_off_at_the_friction_angle(tmp_path, mu, integrator, mass_
     assert (tmp_path / "run" / "tilt.png").stat().st_size > 10_000
 
 
+def predicted_slip_onset_deg(mu, rate, slip):
+    """atan(mu) plus the tilt gained while the block slides `slip` metres (slip = g sqrt(1 + mu^2)
+    omega t^3 / 6: the downhill acceleration g (sin - mu cos) grows as g sqrt(1 + mu^2) omega t
+    from the breakaway, with no second-order term there)."""
+    g, omega = 9.81, math.radians(rate)
+    return math.degrees(math.atan(mu)) + rate * (6 * slip / (g * math.sqrt(1 + mu * mu) * omega)) ** (1 / 3)
+
+
+@pytest.mark.filterwarnings("ignore::vemdem.config.build.MassScalingWarning")
+def test_the_surface_mark_finds_a_sliding_cube_where_its_slip_says(tmp_path):
+    """A lone cube is its own surface layer: the avalanche is marked when it has slid
+    tilt.surface_slip grain sizes, at the tilt the closed form gives; the kinetic mark on the same
+    cube fires as much earlier as the two closed forms say (at the threshold's speed, after a
+    slip of about 0.1 grain sizes)."""
+    state = _cube_state(tmp_path / "cube.npz", 1e6)
+    cfg, module = _cube_config(state, 0.5, avalanche="surface", surface_slip=0.4)
+    summary = module.run(cfg, tmp_path / "surface")
+    size = (6 / math.pi) ** (1 / 3) * EDGE
+    expected = predicted_slip_onset_deg(0.5, 10.0, 0.4 * size)
+    assert expected - 0.05 <= summary["tilt_at_avalanche_deg"] <= expected + 0.1
+    assert summary["avalanche_mark"] == "surface" and summary["surface_layer_grains"] == 1
+    assert 0.4 <= summary["surface_slip_at_avalanche_grains"] < 0.45  # found at the first frame past the mark
+    kinetic = module.run(_cube_config(state, 0.5)[0], tmp_path / "kinetic")
+    assert kinetic["avalanche_mark"] == "kinetic"
+    lead = predicted_slip_onset_deg(0.5, 10.0, 0.4 * size) - predicted_onset_deg(0.5, 10.0, 1e-3, size)  # 0.44 deg
+    assert abs(summary["tilt_at_avalanche_deg"] - kinetic["tilt_at_avalanche_deg"] - lead) < 0.1
+
+
 def _counting_checkpoints(monkeypatch, stop_at=None):
     original = loop_mod.save_checkpoint
     written = []
@@ -116,12 +146,14 @@ def _counting_checkpoints(monkeypatch, stop_at=None):
     return written
 
 
+@pytest.mark.parametrize("mark", ["kinetic", "surface"])
 @pytest.mark.filterwarnings("ignore::vemdem.config.build.MassScalingWarning")
-def test_a_killed_tilt_resumes_to_the_same_bits(tmp_path, monkeypatch):
+def test_a_killed_tilt_resumes_to_the_same_bits(tmp_path, monkeypatch, mark):
     """Killed while the cube comes to rest at tilt.start, while tilting, and right after the
     checkpoint of the frame that finds the avalanche (not yet in tilt.json): each ends as the run
-    that was never interrupted."""
-    cfg, module = _cube_config(_cube_state(tmp_path / "cube.npz", 1e6), 0.5)
+    that was never interrupted (with the surface mark, the layer's start is read back from
+    tilt.json)."""
+    cfg, module = _cube_config(_cube_state(tmp_path / "cube.npz", 1e6), 0.5, avalanche=mark)
     whole = module.run(cfg, tmp_path / "whole")
     tilting_frame, onset_frame = (round(whole[k] / 2e-3) for k in ("tilting_from", "avalanche_time"))
     kills = {"resting": tilting_frame // 2, "tilting": (tilting_frame + onset_frame) // 2, "at": onset_frame}

@@ -87,10 +87,11 @@ def fit_surface(centroids: np.ndarray, theta_deg: float, box, centre, grain_size
 
 
 def plot_tilt(path: Path, centroids: np.ndarray, theta_deg: float, box, centre, floor: float, top: float,
-              after: Surface | None, onset: dict | None, times, kinetic_ratio, tilts, threshold: float,
+              after: Surface | None, onset: dict | None, times, kinetic_ratio, tilts, threshold: float | None,
               title: str = "") -> None:  # fmt: skip
     """Left: the box seen along y in the tilted world, the grains at the end, the surface fits
-    at the avalanche (dashed) and after it; right: the kinetic energy and the tilt against time."""
+    at the avalanche (dashed) and after it; right: the kinetic energy and the tilt against time
+    (threshold: the kinetic mark's level, None with the surface mark)."""
     from .plots import plt
 
     mm = 1e3
@@ -117,7 +118,10 @@ def plot_tilt(path: Path, centroids: np.ndarray, theta_deg: float, box, centre, 
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     ak.semilogy(times, np.maximum(kinetic_ratio, 1e-12), "-", color="tab:purple", label="kinetic energy / (N m g d)")
-    ak.axhline(threshold, color="tab:purple", ls=":", lw=1, label="avalanche threshold")
+    if threshold is not None:  # the kinetic mark (scenarios.tilting_box)
+        ak.axhline(threshold, color="tab:purple", ls=":", lw=1, label="avalanche threshold")
+    if onset is not None:
+        ak.axvline(onset["time"], color="tab:orange", ls="--", lw=1, label="avalanche")
     ak.set_xlabel("time (s)")
     ak.set_ylabel("kinetic energy / (N m g d)")
     ak.grid(alpha=0.3)

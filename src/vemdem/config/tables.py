@@ -319,8 +319,12 @@ TILTING_BOX = {
         "rate": Field(float, 20.0, positive, "tilt rate (degrees/s): slow against an avalanche's growth"),
         "max": Field(float, 60.0, _in(0.0, 90.0, lo_open=True, hi_open=True),
                      "largest tilt (degrees): a box that has not avalanched by then ends the run"),
+        "avalanche": Field(("kinetic", "surface"), "kinetic", doc="what marks the avalanche: the pack's mean kinetic "
+                           "energy (avalanche_kinetic) or the surface layer's downhill slip (surface_slip)"),
         "avalanche_kinetic": Field(float, 1e-3, positive, "mean kinetic energy per grain, as a share of m g d, that "
                                    "marks the avalanche: the tilt stops there"),
+        "surface_slip": Field(float, 0.5, positive, "avalanche = \"surface\": mean downhill slip of the surface "
+                              "layer since the tilting began, in grain sizes, that marks the avalanche"),
     },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }

@@ -9,8 +9,21 @@ Omega^2 r and 2 Omega x v: at 20 deg/s and r = 10 mm they are 1e-4 g and, for gr
 1e-3 g.
 
 Gravity turns to tilt.start at t = 0 and stays there until the pack is at rest again (settle
-table); the tilt then grows at tilt.rate until the mean kinetic energy per grain passes
-tilt.avalanche_kinetic m g d at a frame: the avalanche. The tilt is held from that frame on
+table); the tilt then grows at tilt.rate until the avalanche, found at a frame by one of two marks
+(tilt.avalanche):
+
+- "kinetic": the mean kinetic energy per grain passes tilt.avalanche_kinetic m g d. In a pack a
+  few grains wide this fires on the first burst of rearrangement, which need not set the surface
+  flowing (docs/results.md: after such bursts the surface layer had slipped less than a quarter
+  grain size);
+- "surface": the surface layer (the grains no other covers when the tilting begins,
+  analysis.tilt.surface_grains; all grains when fewer than 5 are) has slipped downhill (+x, along
+  the floor) by tilt.surface_slip grain sizes on average since the tilting began: the surface
+  flows. The slip grows from rest as the tilt passes the surface's angle of stability, so the
+  mark comes later than the onset by the time the layer takes to slip that far (for a block on a
+  plane tilted at omega: (6 s / (g sqrt(1 + mu^2) omega))^(1/3)).
+
+The tilt is held from that frame on
 and the run goes on until the grains are at rest again (settle table, min_time counted from the
 avalanche) or settle.max_time after it. A box still at rest at tilt.max ends the run with no
 avalanche.
@@ -34,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.plots import plot_grains_3d
-from ..analysis.tilt import fit_surface, plot_tilt, tilted_gravity
+from ..analysis.tilt import MIN_SURFACE_GRAINS, fit_surface, plot_tilt, surface_grains, tilted_gravity
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls
@@ -55,18 +68,21 @@ class Tilt:
     """The tilt against time: tilt.start from t = 0 until the pack is at rest there again (the turn
     to tilt.start shakes it), then tilt.rate more per second up to tilt.max, held from the
     avalanche on. `stop` and `control` are the time loop's hooks. The two events (tilting from,
-    avalanche) are kept in DIR/tilt.json, written at the frame that finds them, after that frame's
-    checkpoint: a resumed run reads them back or, resuming from that very frame, finds them again."""
+    avalanche; with the surface mark, the surface layer and where it stood) are kept in
+    DIR/tilt.json, written at the frame that finds them, after that frame's checkpoint: a resumed
+    run reads them back or, resuming from that very frame, finds them again."""
 
     def __init__(self, scene, cfg: dict, meta: dict, out_dir: Path, lumped: bool, resume: bool):
         self.scene, self.meta, self.lumped = scene, meta, lumped
         tilt, self.settle = cfg["tilt"], cfg["settle"]
         self.start, self.rate, self.max = tilt["start"], tilt["rate"], tilt["max"]
         self.threshold = tilt["avalanche_kinetic"]
+        self.mark, self.slip = tilt["avalanche"], tilt["surface_slip"]
         self.g = float(np.linalg.norm(scene.gravity))
         self.path = out_dir / "tilt.json"
         events = json.loads(self.path.read_text()) if resume and self.path.is_file() else {}
         self.tilting_from, self.onset = events.get("tilting_from"), events.get("avalanche")
+        self.surface = events.get("surface")  # {"grains": [...], "x": [...]}: the layer when the tilting began
         self.rest_limit = self.settle["kinetic_threshold"] * rest_energy(scene) * scene.n_grains
         scene.gravity[:] = self.gravity(0.0)
 
@@ -93,18 +109,39 @@ class Tilt:
         if self.tilting_from is None:
             if at_rest:
                 self.tilting_from = state.t
+                if self.mark == "surface":
+                    self.surface = self._surface_layer(state)
                 self._save()
             return state.t >= self.settle["max_time"]  # never at rest at tilt.start
         if self.onset is None:
-            if energy > self.threshold * rest_energy(self.scene) * self.scene.n_grains:
+            if self._avalanching(state, energy):
                 self._record_onset(state)
                 return False
             return state.t >= self.tilting_from + self.full_tilt_time + self.settle["min_time"]  # at rest at tilt.max
         return state.t - self.onset["time"] >= self.settle["min_time"] and energy < self.rest_limit
 
+    def _avalanching(self, state, energy: float) -> bool:
+        if self.mark == "kinetic":
+            return energy > self.threshold * rest_energy(self.scene) * self.scene.n_grains
+        return self.surface_slip(state) >= self.slip * self.scene.grain_size
+
+    def _surface_layer(self, state) -> dict:
+        centroids = self.scene.grain_centroids(state.x)
+        top = surface_grains(centroids, self.meta["box"], self.meta["centre"], self.scene.grain_size)
+        if len(top) < MIN_SURFACE_GRAINS:  # a grain or a few: they are the surface
+            top = np.arange(self.scene.n_grains)
+        return {"grains": top.tolist(), "x": centroids[top, 0].tolist()}
+
+    def surface_slip(self, state) -> float:
+        """Mean downhill (+x) slip of the surface layer since the tilting began (m)."""
+        grains = np.asarray(self.surface["grains"], dtype=np.int64)
+        return float(np.mean(self.scene.grain_centroids(state.x)[grains, 0] - np.asarray(self.surface["x"])))
+
     def _record_onset(self, state) -> None:
         angle = self.angle(state.t)
         self.onset = {"time": state.t, "tilt_deg": angle}
+        if self.mark == "surface":
+            self.onset["surface_slip_grains"] = self.surface_slip(state) / self.scene.grain_size
         try:
             s = fit_surface(self.scene.grain_centroids(state.x), angle, self.meta["box"], self.meta["centre"],
                             self.scene.grain_size)  # fmt: skip
@@ -114,7 +151,10 @@ class Tilt:
         self._save()
 
     def _save(self) -> None:
-        self.path.write_text(json.dumps({"tilting_from": self.tilting_from, "avalanche": self.onset}, indent=2) + "\n")
+        events = {"tilting_from": self.tilting_from, "avalanche": self.onset}
+        if self.surface is not None:
+            events["surface"] = self.surface
+        self.path.write_text(json.dumps(events, indent=2) + "\n")
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
@@ -153,6 +193,7 @@ def measure_tilt(scene, state, tilt: Tilt, meta: dict, out_dir: Path) -> dict:
     onset = tilt.onset
     out = {"tilt_deg": angle, "fill_height_grains": (float(centroids[:, 2].max()) - meta["floor"]) / scene.grain_size}
     out["tilting_from"] = tilt.tilting_from  # s: the pack at rest again at tilt.start
+    out["avalanche_mark"] = tilt.mark
     if onset is None:
         reason = (f"no avalanche up to tilt.max = {tilt.max:g} degrees" if tilt.tilting_from is not None else
                   f"the pack was not at rest at tilt.start = {tilt.start:g} degrees by settle.max_time: start lower")
@@ -163,6 +204,9 @@ def measure_tilt(scene, state, tilt: Tilt, meta: dict, out_dir: Path) -> dict:
     else:
         out.update(angle_of_avalanche_deg=onset["angle_deg"], angle_of_avalanche_uncertainty_deg=onset.get("stderr_deg"),
                    tilt_at_avalanche_deg=onset["tilt_deg"], avalanche_time=onset["time"])  # fmt: skip
+        if tilt.surface is not None:
+            out["surface_layer_grains"] = len(tilt.surface["grains"])
+            out["surface_slip_at_avalanche_grains"] = onset.get("surface_slip_grains")
         if onset["angle_deg"] is None:
             out["angle_of_avalanche_error"] = onset["error"]
         try:
@@ -180,7 +224,8 @@ def measure_tilt(scene, state, tilt: Tilt, meta: dict, out_dir: Path) -> dict:
     title = f"tilting box: {scene.n_grains} grains, mu_s = {friction.mu_s:g}, mu_d = {friction.mu_d:g}"
     plot_tilt(out_dir / "tilt.png", centroids, angle, meta["box"], meta["centre"], meta["floor"],
               float(centroids[:, 2].max()) + scene.grain_size, after, onset, times,
-              kinetic / (rest_energy(scene) * scene.n_grains), [tilt.angle(t) for t in times], tilt.threshold,
+              kinetic / (rest_energy(scene) * scene.n_grains), [tilt.angle(t) for t in times],
+              tilt.threshold if tilt.mark == "kinetic" else None,
               title)  # fmt: skip
     plot_grains_3d(out_dir / "tilt_3d.png", state.x, *scene.surface_triangles(), title=title, floor_z=meta["floor"])
     return out
