@@ -132,6 +132,16 @@ def test_the_surface_mark_finds_a_sliding_cube_where_its_slip_says(tmp_path):
     assert abs(summary["tilt_at_avalanche_deg"] - kinetic["tilt_at_avalanche_deg"] - lead) < 0.1
 
 
+def test_mirror_sides_are_the_frictionless_y_walls():
+    from vemdem.scenarios.tilting_box import tilt_walls
+
+    meta = {"box": [10e-3, 3e-3], "floor": 0.0, "centre": [0.0, 0.0]}
+    walls = {w.name: w for w in tilt_walls(meta, "mirrors")}
+    assert {n for n, w in walls.items() if w.frictionless} == {"wall -y", "wall +y"}
+    assert [abs(walls[n].normal[1]) for n in ("wall -y", "wall +y")] == [1.0, 1.0]
+    assert not any(w.frictionless for w in tilt_walls(meta, "walls"))
+
+
 def _counting_checkpoints(monkeypatch, stop_at=None):
     original = loop_mod.save_checkpoint
     written = []

@@ -325,6 +325,8 @@ TILTING_BOX = {
                                    "marks the avalanche: the tilt stops there"),
         "surface_slip": Field(float, 0.5, positive, "avalanche = \"surface\": mean downhill slip of the surface "
                               "layer since the tilting began, in grain sizes, that marks the avalanche"),
+        "sides": Field(("walls", "mirrors"), "walls", doc="the box's +-y sides: walls with the grains' friction, or "
+                       "frictionless mirror planes (a box as wide as many mirrored copies: no side-wall support)"),
     },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }

@@ -28,6 +28,10 @@ and the run goes on until the grains are at rest again (settle table, min_time c
 avalanche) or settle.max_time after it. A box still at rest at tilt.max ends the run with no
 avalanche.
 
+tilt.sides = "mirrors" makes the box's +-y sides frictionless mirror planes: in a box a few
+grains wide, frictional side walls carry part of the pack's weight and hold its surface up to
+tilts far past its angle of stability (docs/results.md).
+
 Starts from a `pack` state file (`initial_state`) or settles the `[pack]` table first (as
 pile_collapse). Outputs in DIR: summary.json (angle_of_avalanche_deg, tilt_at_avalanche_deg,
 angle_of_repose_deg with their uncertainties, fill_height_grains, ...; energy: the balance from the
@@ -42,6 +46,7 @@ from __future__ import annotations
 import csv
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -162,7 +167,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     meta = dict(initial.meta)
-    walls = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
+    walls = tilt_walls(meta, cfg["tilt"]["sides"])
     scene = scene_from(initial.grains, cfg, walls)
     integrator = make_integrator(solver_options_from(cfg), scene)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
@@ -175,6 +180,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     state = result.state
     summary = run_summary("tilting_box", scene, result, t_start)
     summary.update(measure_tilt(scene, state, tilt, meta, out_dir))
+    summary["sides"] = cfg["tilt"]["sides"]
     summary["settled"] = tilt.onset is not None and result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["initial_state"] = str(path)
@@ -184,6 +190,16 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                friction_arrays(state.history))  # fmt: skip
     write_json(out_dir / "summary.json", summary)
     return summary
+
+
+def tilt_walls(meta: dict, sides: str) -> list:
+    """The pack's box; with sides = "mirrors" its +-y sides frictionless: a pack a few grains wide
+    then slides as a slice of a wide one would, where frictional side walls hold it up (the wall
+    friction carries a share of the weight that grows with depth over width: Janssen)."""
+    walls = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
+    if sides == "mirrors":
+        walls = [replace(w, frictionless=True) if w.name in ("wall -y", "wall +y") else w for w in walls]
+    return walls
 
 
 def measure_tilt(scene, state, tilt: Tilt, meta: dict, out_dir: Path) -> dict:
