@@ -14,8 +14,8 @@ table); the tilt then grows at tilt.rate until the avalanche, found at a frame b
 
 - "kinetic": the mean kinetic energy per grain passes tilt.avalanche_kinetic m g d. In a pack a
   few grains wide this fires on the first burst of rearrangement, which need not set the surface
-  flowing (docs/results.md: after such bursts the surface layer had slipped less than a quarter
-  grain size);
+  flowing (docs/results.md: in four of six boxes 3 grains wide the surface layer slipped 0.08-0.22
+  grain sizes from the start of the tilt to the end of the run);
 - "surface": the surface layer (the grains no other covers when the tilting begins,
   analysis.tilt.surface_grains; all grains when fewer than 5 are) has slipped downhill (+x, along
   the floor) by tilt.surface_slip grain sizes on average since the tilting began: the surface
