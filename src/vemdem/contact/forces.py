@@ -46,7 +46,8 @@ def _normal_terms(c, nn, d, grad, law, energy, local_force):
 def _local_forces(x, ints, floats, law, energy, local_force):
     """_local_terms without the tangent (explicit steps): numba compiles every branch of a
     kernel, and the tangent's would cost a fresh install's first explicit run seconds."""
-    for c in prange(len(ints)):
+    for ci in prange(len(ints)):
+        c = np.int64(ci)  # np.int64: a prange index is uint64 in the parallel body, a second compilation of the callees
         kind = ints[c, KIND]
         nn = N_NODES[kind]
         xs = _pair_nodes(x, ints, c, nn)
@@ -58,7 +59,8 @@ def _local_forces(x, ints, floats, law, energy, local_force):
 @njit(parallel=True, cache=True)
 def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
     """Energy, force and 18 x 18 tangent of every pair (implicit steps)."""
-    for c in prange(len(ints)):
+    for ci in prange(len(ints)):
+        c = np.int64(ci)  # np.int64: a prange index is uint64 in the parallel body, a second compilation of the callees
         kind = ints[c, KIND]
         nn = N_NODES[kind]
         xs = _pair_nodes(x, ints, c, nn)

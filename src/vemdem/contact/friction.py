@@ -213,9 +213,9 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
 def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                        stick_out, gt_out):  # fmt: skip
     """Damping + friction residual of every pair (no tangent)."""
-    for c in prange(len(ints)):
-        _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, stick_out,
-                    gt_out)  # fmt: skip
+    for c in prange(len(ints)):  # np.int64: c is uint64 in the parallel body, a second compilation of _pair_force
+        _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                    stick_out, gt_out)  # fmt: skip
 
 
 @njit(parallel=True, cache=True)
@@ -223,8 +223,8 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
                       local_tangent, stick_out, gt_out):  # fmt: skip
     """Damping + friction residual of every pair and its analytic Jacobian (18 x 18)."""
     for c in prange(len(ints)):
-        xs, vs = _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
-                             stick_out, gt_out)  # fmt: skip
+        xs, vs = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
+                             local_force, stick_out, gt_out)  # fmt: skip
         dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
                             fr[c], m_eq[c], local_tangent[c])  # fmt: skip
 

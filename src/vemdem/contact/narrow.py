@@ -257,12 +257,13 @@ def point_triangle_closest(p, t0, t1, t2):
     ok, u, v = vertex_face_lcp(p, t0, t1, t2)
     if ok:
         return PT_T, _norm3(p - (1.0 - u - v) * t0 - u * t1 - v * t2)
-    k, d = _point_point_candidate(p, t0, PT_T0, -1, np.inf)
-    k, d = _point_point_candidate(p, t1, PT_T1, k, d)
-    k, d = _point_point_candidate(p, t2, PT_T2, k, d)
-    k, d = _point_edge_candidate(p, t0, t1, PT_E0, k, d)
-    k, d = _point_edge_candidate(p, t1, t2, PT_E1, k, d)
-    return _point_edge_candidate(p, t2, t0, PT_E2, k, d)
+    # np.int64: numba compiles a callee once per literal argument value (issue 15: compile time)
+    k, d = _point_point_candidate(p, t0, np.int64(PT_T0), np.int64(-1), np.inf)
+    k, d = _point_point_candidate(p, t1, np.int64(PT_T1), k, d)
+    k, d = _point_point_candidate(p, t2, np.int64(PT_T2), k, d)
+    k, d = _point_edge_candidate(p, t0, t1, np.int64(PT_E0), k, d)
+    k, d = _point_edge_candidate(p, t1, t2, np.int64(PT_E1), k, d)
+    return _point_edge_candidate(p, t2, t0, np.int64(PT_E2), k, d)
 
 
 @njit(cache=True)
@@ -272,14 +273,14 @@ def edge_edge_closest(a0, a1, b0, b1):
     ok, s, t = edge_edge_lcp(a0, a1, b0, b1)
     if ok:
         return EE_A_B, _norm3((1.0 - s) * a0 + s * a1 - (1.0 - t) * b0 - t * b1)
-    k, d = _point_point_candidate(a0, b0, EE_A0B0, -1, np.inf)
-    k, d = _point_point_candidate(a0, b1, EE_A0B1, k, d)
-    k, d = _point_point_candidate(a1, b0, EE_A1B0, k, d)
-    k, d = _point_point_candidate(a1, b1, EE_A1B1, k, d)
-    k, d = _point_edge_candidate(b0, a0, a1, EE_A_B0, k, d)
-    k, d = _point_edge_candidate(b1, a0, a1, EE_A_B1, k, d)
-    k, d = _point_edge_candidate(a0, b0, b1, EE_A0_B, k, d)
-    return _point_edge_candidate(a1, b0, b1, EE_A1_B, k, d)
+    k, d = _point_point_candidate(a0, b0, np.int64(EE_A0B0), np.int64(-1), np.inf)
+    k, d = _point_point_candidate(a0, b1, np.int64(EE_A0B1), k, d)
+    k, d = _point_point_candidate(a1, b0, np.int64(EE_A1B0), k, d)
+    k, d = _point_point_candidate(a1, b1, np.int64(EE_A1B1), k, d)
+    k, d = _point_edge_candidate(b0, a0, a1, np.int64(EE_A_B0), k, d)
+    k, d = _point_edge_candidate(b1, a0, a1, np.int64(EE_A_B1), k, d)
+    k, d = _point_edge_candidate(a0, b0, b1, np.int64(EE_A0_B), k, d)
+    return _point_edge_candidate(a1, b0, b1, np.int64(EE_A1_B), k, d)
 
 
 @njit(cache=True)

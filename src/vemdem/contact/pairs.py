@@ -299,7 +299,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
-    n = 0
+    n = np.int64(0)  # typed, as the kinds below: numba compiles _record once per literal argument value
     box = np.empty((4, 3))
     _region(glo, ghi, A, B, gbar, box[0], box[1])
     _region(glo, ghi, B, A, gbar, box[2], box[3])
@@ -336,7 +336,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                 d, u, v = _vf_gap(x, p, f, faces, gbar)
                 if d >= 0.0:
                     nodes = np.array([p, faces[f, 0], faces[f, 1], faces[f, 2]])
-                    n = _record(ints, floats, n, cap, VERTEX_FACE, ga, gb, p, f, nodes, u, v, d)
+                    n = _record(ints, floats, n, cap, np.int64(VERTEX_FACE), ga, gb, p, f, nodes, u, v, d)
     for ea in eA:
         for eb in eB:
             if not _boxes_near(ebox, ea, eb, gbar):
@@ -344,7 +344,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
             d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
             if d >= 0.0:
                 nodes = np.array([edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]])
-                n = _record(ints, floats, n, cap, EDGE_EDGE, A, B, ea, eb, nodes, s, t, d)
+                n = _record(ints, floats, n, cap, np.int64(EDGE_EDGE), A, B, ea, eb, nodes, s, t, d)
     for side in range(2):
         verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
         for p in verts:
@@ -356,14 +356,14 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                     x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar
                 ):
                     nodes = np.array([p, edges[e, 0], edges[e, 1]])
-                    n = _record(ints, floats, n, cap, VERTEX_EDGE, ga, gb, p, e, nodes, t, 0.0, d)
+                    n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, nodes, t, 0.0, d)
     for p in vA:
         for q in vB:
             d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
             if d <= gbar and _vertex_vertex_survives(
                 x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar
             ):
-                n = _record(ints, floats, n, cap, VERTEX_VERTEX, A, B, p, q, np.array([p, q]), 0.0, 0.0, d)
+                n = _record(ints, floats, n, cap, np.int64(VERTEX_VERTEX), A, B, p, q, np.array([p, q]), 0.0, 0.0, d)
     return n
 
 

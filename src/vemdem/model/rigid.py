@@ -37,7 +37,8 @@ def place_vertices(centre, rotation, body, vertex_grain):
     """x_i = c_g + R_g X_i for every vertex."""
     x = np.empty_like(body)
     for i in prange(len(body)):
-        place_vertex(x, i, centre, rotation, body, vertex_grain[i])
+        # np.int64: a prange index is uint64 in the parallel body, a second compilation of the callee
+        place_vertex(x, np.int64(i), centre, rotation, body, vertex_grain[i])
     return x
 
 

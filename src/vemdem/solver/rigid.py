@@ -65,11 +65,12 @@ def free_rotation(rotation, momentum, moments, h):
         R = out[g]
         pi = np.empty(3)
         _body_momentum(R, momentum[g], pi)
-        _axis_flow(R, pi, moments[g], 0, 0.5 * h)
-        _axis_flow(R, pi, moments[g], 1, 0.5 * h)
-        _axis_flow(R, pi, moments[g], 2, h)
-        _axis_flow(R, pi, moments[g], 1, 0.5 * h)
-        _axis_flow(R, pi, moments[g], 0, 0.5 * h)
+        # np.int64: numba compiles a callee once per literal argument value (issue 15: compile time)
+        _axis_flow(R, pi, moments[g], np.int64(0), 0.5 * h)
+        _axis_flow(R, pi, moments[g], np.int64(1), 0.5 * h)
+        _axis_flow(R, pi, moments[g], np.int64(2), h)
+        _axis_flow(R, pi, moments[g], np.int64(1), 0.5 * h)
+        _axis_flow(R, pi, moments[g], np.int64(0), 0.5 * h)
     return out
 
 
@@ -102,7 +103,7 @@ def rigid_vertex_motion(centre, rotation, velocity, momentum, moments, body, ver
         w = np.empty(3)
         _omega(rotation[g], momentum[g], moments[g], w)
         for i in range(vertex_ptr[g], vertex_ptr[g + 1]):
-            place_vertex(x, i, centre, rotation, body, g)
+            place_vertex(x, i, centre, rotation, body, np.int64(g))  # np.int64: g is uint64 in the parallel body
             r0, r1, r2 = x[i, 0] - centre[g, 0], x[i, 1] - centre[g, 1], x[i, 2] - centre[g, 2]
             v[i, 0] = velocity[g, 0] + (w[1] * r2 - w[2] * r1)
             v[i, 1] = velocity[g, 1] + (w[2] * r0 - w[0] * r2)
