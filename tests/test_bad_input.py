@@ -84,6 +84,7 @@ CONFIG_CASES = [
     ("unknown integrator", DROP, setter("solver.integrator", "leapfrog"), "solver.integrator"),
     ("unknown linear solver", DROP, setter("solver.linear", "cg"), "solver.linear"),
     ("dt_min above dt_max", DROP, setter("solver.dt_min", 1e-3), "solver.dt_min"),
+    ("easy_iterations above max_iterations", DROP, setter("solver.easy_iterations", 20), "solver.easy_iterations"),
     ("gamma below 1/2", DROP, setter("solver.gamma", 0.4), "solver.gamma"),
     ("negative energy_growth", DROP, setter("solver.energy_growth", -1.0), "solver.energy_growth"),
     ("mass scaling below 1", DROP, setter("solver.mass_scaling", 0.5), "solver.mass_scaling"),

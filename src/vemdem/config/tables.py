@@ -135,6 +135,11 @@ SOLVER = {
     "dt_min": Field(float, 1e-10, positive, "the run stops below this step (s)"),
     "dt_max": Field(float, 1e-4, positive, "largest step (s)"),
     "max_iterations": Field(int, 15, positive, "Newton iterations before a step is rejected"),
+    "easy_iterations": Field(
+        int, 8, positive,
+        "implicit, flexible grains: a step is easy when Newton converged in at most this many iterations; "
+        "after 3 easy steps in a row the step grows by 1.5",
+    ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
     ),
@@ -368,6 +373,11 @@ def check_rules(cfg: dict) -> None:
             raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
         if solver["dt"] < solver["dt_min"]:
             raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    if isinstance(solver, dict) and "easy_iterations" in solver and "max_iterations" in solver:
+        if solver["easy_iterations"] > solver["max_iterations"]:
+            limit = solver["max_iterations"]
+            raise ConfigError(f"solver.easy_iterations: must not exceed solver.max_iterations ({limit}), "
+                              f"got {solver['easy_iterations']}")  # fmt: skip
     tilt = cfg.get("tilt")
     if isinstance(tilt, dict) and "start" in tilt and "max" in tilt and tilt["start"] >= tilt["max"]:
         raise ConfigError(f"tilt.start: must be below tilt.max ({tilt['max']:g} degrees), got {tilt['start']:g}")

@@ -284,17 +284,18 @@ class ContactModel:
         return ints, floats
 
     # ------------------------------------------------------------------ forces
-    def potential(self, x, t, candidates) -> float:
+    def potential(self, x, t, candidates, frozen=None) -> float:
         """The contact potential sum Phi(d) alone (no friction, no tangent): a line-search merit."""
-        x_all, ints, floats = self.pairs(x, t, candidates)
+        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen)
         return evaluate_contacts(x_all, ints, floats, self.law_params, len(x_all), False).total_energy
 
     def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
-                 tangent: bool = False) -> ContactResult:  # fmt: skip
+                 tangent: bool = False, frozen: FrozenPairs | None = None) -> ContactResult:  # fmt: skip
         """Contact energy, residual (dPhi/dx + dissipative terms), tangent and wall reactions.
 
-        v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics."""
-        x_all, ints, floats = self.pairs(x, t, candidates)
+        v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics.
+        frozen: records kept whether or not the narrow phase finds them now (Newton's cycling pairs)."""
+        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen)
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
         residual = conservative.force
@@ -373,6 +374,30 @@ class ContactModel:
         mA = self.grain_mass[np.minimum(gA, G - 1)]
         mB = self.grain_mass[np.minimum(gB, G - 1)]
         return np.where(gA >= G, mB, np.where(gB >= G, mA, mA * mB / (mA + mB)))
+
+
+@dataclass
+class FrozenPairs:
+    """Records (rows of ints and floats) kept in the eligible set while Newton iterates, whether or not
+    the narrow phase finds them at the current iterate: a pair that leaves and rejoins the set every
+    other iteration (its record ends where no other takes its force over) otherwise leaves Newton
+    cycling between two residuals (solver.newmark.NewmarkParameters.freeze_cycles). A kept record's
+    gap is measured at its closest-point coordinates of the iterate it was last found at, a smooth
+    function of the node positions."""
+
+    keys: np.ndarray  # sorted pair_keys
+    ints: np.ndarray
+    floats: np.ndarray
+
+
+def _with_frozen(x_all, ints, floats, frozen: FrozenPairs | None):
+    """The narrow phase's records plus the frozen ones it did not find."""
+    if frozen is None or not len(frozen.keys):
+        return x_all, ints, floats
+    missing = ~np.isin(frozen.keys, pair_keys(ints))
+    if not missing.any():
+        return x_all, ints, floats
+    return x_all, np.vstack([ints, frozen.ints[missing]]), np.vstack([floats, frozen.floats[missing]])
 
 
 def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,

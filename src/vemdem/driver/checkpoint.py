@@ -30,6 +30,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
              krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint,
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
+             frozen_pair_steps=stats.frozen_pair_steps,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -53,6 +54,8 @@ def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
             if "rejections" in d.files:
                 stats.rejections = json.loads(str(d["rejections"]))
                 stats.energy_gains = int(d["energy_gains"])
+            if "frozen_pair_steps" in d.files:  # checkpoints before session 14 have none
+                stats.frozen_pair_steps = int(d["frozen_pair_steps"])
             frame = int(d["frame"])
     except CheckpointError:
         raise

@@ -35,6 +35,7 @@ class SolverOptions:
     dt_min: float = 1e-10
     dt_max: float = 1e-4
     max_iterations: int = 15
+    easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -142,7 +143,8 @@ class RigidImplicit(RigidCentral):
 
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
-                       entry_fraction=o.entry_fraction, energy_growth=o.energy_growth)  # fmt: skip
+                       entry_fraction=o.entry_fraction, energy_growth=o.energy_growth,
+                       easy_iterations=o.easy_iterations)  # fmt: skip
 
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:

@@ -31,7 +31,7 @@ from ..contact.ccd import (
     plane_distances,
     surface_displacements,
 )
-from ..contact.model import PenetrationError
+from ..contact.model import FrozenPairs, PenetrationError, pair_keys
 from ..model.bodies import InvertedElementError
 from ..model.motion import RigidRetraction, rigid_part
 from ..model.scene import Scene
@@ -70,6 +70,14 @@ class NewmarkParameters:
     # iteration there, and the correction cycles without going below 1e-8 (docs/dynamics.md). 0: off.
     stall_rtol: float = 10.0
     stall_xtol: float = 1e3
+    # A pair that leaves and re-enters the eligible set every other iteration (a vertex-edge pair at its
+    # edge's end, where no other record takes its force over: the narrow phase's selection rules make
+    # the contact force jump there) leaves Newton with no root to find: the residual cycles between two
+    # values and the step is rejected. With freeze_cycles such pairs are kept in the set for the rest of
+    # the step (contact.model.FrozenPairs), the iteration converges, and the next step's search decides
+    # afresh. (Leaving them out instead let Newton push their features together against the update
+    # bound: stuck at an update share of 1e-9, seen in the 515-grain lid jam.)
+    freeze_cycles: bool = True
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
@@ -191,13 +199,14 @@ class _IncrementalPotential:
         self.scene, self.a1, self.f_grav, self.t1, self.candidates = scene, a1, f_grav, t1, candidates
         self.x_tilde = (state.x + dt * state.v + dt * dt * (0.5 - beta) * state.a).ravel()
         self.M = scene.mass_matrix()
+        self.frozen = None  # Newton's frozen pairs (NewmarkParameters.freeze_cycles)
 
     def value(self, x, strain_energy=None, contact_energy=None) -> float:
         s = self.scene
         if strain_energy is None:
             strain_energy = s.bodies.evaluate(x, force=False).total_energy
         if contact_energy is None:
-            contact_energy = s.contact.potential(x, self.t1, self.candidates)
+            contact_energy = s.contact.potential(x, self.t1, self.candidates, self.frozen)
         r = x.ravel() - self.x_tilde
         return 0.5 * self.a1 * float(r @ (self.M @ r)) + strain_energy + contact_energy - float(self.f_grav @ x.ravel())
 
@@ -292,6 +301,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     krylov = 0
     full_before, dx_before = False, np.inf
     corrections = []
+    frozen, key_trail = None, []
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
@@ -299,9 +309,11 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         vel = a4 * du + a5 * state.v + a6 * state.a
         try:
             el = scene.bodies.evaluate(x, tangent=True)
-            cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True)
+            cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
+        if params.freeze_cycles and tw == t1:
+            frozen = _freeze_cycling(key_trail, cr.ints, cr.floats, frozen)
         inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
         at_end = tw == t1
@@ -332,6 +344,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         corrections.append((dx_norm, r_norm))
         if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
+            merit.frozen = frozen
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = path.at(alpha)
         if not at_end:
@@ -369,8 +382,29 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         raise StepRejected(f"{missed} contact pairs appeared inside the activation gap during the step")
     power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
-    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov)
+    info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
+                    0 if frozen is None else len(frozen.keys))  # fmt: skip
     return new, info
+
+
+def _freeze_cycling(trail: list, ints: np.ndarray, floats: np.ndarray, frozen: FrozenPairs | None):
+    """`frozen` plus the pairs that left or joined the eligible set at this iteration after joining or
+    leaving it at the one before (a two-iteration cycle), each with its latest record. `trail` keeps
+    the last iterations' (keys, ints, floats)."""
+    trail.append((pair_keys(ints), ints, floats))
+    if len(trail) < 3:
+        return frozen
+    (k2, _, _), (k1, i1, f1), (k0, i0, f0) = trail
+    del trail[0]
+    cycling = np.intersect1d(np.setxor1d(k0, k1), np.setxor1d(k1, k2))
+    wanted = cycling if frozen is None else np.union1d(frozen.keys, cycling)
+    if not len(wanted):
+        return frozen
+    now = np.isin(k0, wanted)  # a frozen pair is always in the current records (found or kept)
+    before = np.isin(k1, wanted) & ~np.isin(k1, k0)
+    keys = np.concatenate([k0[now], k1[before]])
+    order = np.argsort(keys)
+    return FrozenPairs(keys[order], np.vstack([i0[now], i1[before]])[order], np.vstack([f0[now], f1[before]])[order])
 
 
 def step_limit(scene: Scene, state: State, control: StepControl) -> float:
@@ -447,6 +481,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         stats.accepted += 1
         stats.newton_iterations += info.iterations
         stats.krylov_iterations += info.krylov_iterations
+        stats.frozen_pair_steps += info.frozen_pairs > 0
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)
