@@ -116,11 +116,17 @@ def box_walls(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0
     ]
 
 
+def mirrored(walls: list, names: tuple[str, ...]) -> list:
+    """`walls` with the ones named made frictionless: mirror planes, across which the grains move as
+    if the mirror image of the scene were there."""
+    return [replace(w, frictionless=True) if w.name in names else w for w in walls]
+
+
 def corner_mirrors(size_x: float, size_y: float, floor_z: float = 0.0, center=(0.0, 0.0)) -> list[PlaneWall]:
-    """The -x and -y walls of box_walls' box, frictionless: mirror planes, so the grains in their
-    corner move as if the mirrored quarters of a box four times as large were there."""
+    """The -x and -y walls of box_walls' box as mirror planes, so the grains in their corner move as
+    if the mirrored quarters of a box four times as large were there."""
     _floor, back, _front, side_lo, _side_hi = box_walls(size_x, size_y, floor_z, center)
-    return [replace(back, frictionless=True), replace(side_lo, frictionless=True)]
+    return mirrored([back, side_lo], (back.name, side_lo.name))
 
 
 def disc_wall(radius: float, z: float = 0.0, centre=(0.0, 0.0), segments: int = 64, name: str = "disc") -> MeshWall:

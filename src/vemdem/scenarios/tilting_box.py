@@ -46,7 +46,6 @@ from __future__ import annotations
 import csv
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -55,7 +54,7 @@ from ..analysis.plots import plot_grains_3d
 from ..analysis.tilt import MIN_SURFACE_GRAINS, fit_surface, plot_tilt, surface_grains, tilted_gravity
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
-from ..contact.walls import box_walls
+from ..contact.walls import box_walls, mirrored
 from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import energy_balance, run_summary
@@ -197,9 +196,7 @@ def tilt_walls(meta: dict, sides: str) -> list:
     then slides as a slice of a wide one would, where frictional side walls hold it up (the wall
     friction carries a share of the weight that grows with depth over width: Janssen)."""
     walls = box_walls(*meta["box"], meta["floor"], tuple(meta["centre"]))
-    if sides == "mirrors":
-        walls = [replace(w, frictionless=True) if w.name in ("wall -y", "wall +y") else w for w in walls]
-    return walls
+    return mirrored(walls, ("wall -y", "wall +y")) if sides == "mirrors" else walls
 
 
 def measure_tilt(scene, state, tilt: Tilt, meta: dict, out_dir: Path) -> dict:
