@@ -100,3 +100,18 @@ def test_pairs_that_join_or_leave_once_are_not_frozen():
     for rows in ([a, b], [a, b, c], [a, c], [a, c]):  # c joins, b leaves: no cycle
         frozen = _freeze_cycling(trail, *records(rows), frozen)
     assert frozen is None
+
+
+def test_the_config_key_reaches_newton():
+    import tomllib
+
+    from vemdem.config.build import solver_options_from
+    from vemdem.scenarios.registry import checked_config, example_text
+    from vemdem.solver.newmark import NewmarkParameters
+
+    assert NewmarkParameters().freeze_cycles is False  # off by default: docs/dynamics.md says why
+    cfg = tomllib.loads(example_text("drop"))
+    cfg["solver"].update(freeze_cycles=True, max_iterations=40, easy_iterations=20)
+    cfg, _ = checked_config(cfg)
+    options = solver_options_from(cfg)
+    assert (options.freeze_cycles, options.max_iterations, options.easy_iterations) == (True, 40, 20)

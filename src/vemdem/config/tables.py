@@ -140,6 +140,11 @@ SOLVER = {
         "implicit, flexible grains: a step is easy when Newton converged in at most this many iterations; "
         "after 3 easy steps in a row the step grows by 1.5",
     ),
+    "freeze_cycles": Field(
+        bool, False,
+        doc="implicit, flexible grains: keep a pair that leaves and rejoins Newton's contact set every other "
+            "iteration for the rest of the step (docs/dynamics.md; the 515-grain lid jam at the real density)",
+    ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
     ),

@@ -36,6 +36,7 @@ class SolverOptions:
     dt_max: float = 1e-4
     max_iterations: int = 15
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
+    freeze_cycles: bool = False  # implicit flexible: keep pairs that cycle in and out of Newton's set
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -74,7 +75,8 @@ class ImplicitNewmark:
         self.control = _control(options)
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
                                         mass_damping=options.mass_damping, predictor=options.predictor,
-                                        linear=make_linear_solver(options.linear))  # fmt: skip
+                                        linear=make_linear_solver(options.linear),
+                                        freeze_cycles=options.freeze_cycles)  # fmt: skip
 
     @property
     def linear_stats(self):
