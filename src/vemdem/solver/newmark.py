@@ -198,11 +198,11 @@ class _IncrementalPotential:
     dt^2 (1/2 - beta) a_n: its gradient is the Newmark residual without the dissipative terms, so a
     backtracking line search on it damps Newton's overshoot into the barrier (as in IPC)."""
 
-    def __init__(self, scene, state, dt, a1, beta, f_grav, t1, candidates):
+    def __init__(self, scene, state, dt, a1, beta, f_grav, t1, candidates, frozen=None):
         self.scene, self.a1, self.f_grav, self.t1, self.candidates = scene, a1, f_grav, t1, candidates
         self.x_tilde = (state.x + dt * state.v + dt * dt * (0.5 - beta) * state.a).ravel()
         self.M = scene.mass_matrix()
-        self.frozen = None  # Newton's frozen pairs (NewmarkParameters.freeze_cycles)
+        self.frozen = frozen  # Newton's frozen pairs (NewmarkParameters.freeze_cycles)
 
     def value(self, x, strain_energy=None, contact_energy=None) -> float:
         s = self.scene
@@ -346,8 +346,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             alpha = params.stall_share
         corrections.append((dx_norm, r_norm))
         if params.line_search and np.abs(dx).max() > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
-            merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates)
-            merit.frozen = frozen
+            merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates, frozen)
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = path.at(alpha)
         if not at_end:

@@ -51,7 +51,7 @@ class StepInfo:
     floats: np.ndarray
     contact: object = None  # the ContactResult at the accepted state (frames write it)
     krylov_iterations: int = 0  # linear-solver iterations of the step (iterative solvers)
-    frozen_pairs: int = 0  # implicit: pairs left out of Newton for cycling (NewmarkParameters.freeze_cycles)
+    frozen_pairs: int = 0  # implicit: pairs Newton kept in its set for cycling (NewmarkParameters.freeze_cycles)
 
 
 @dataclass
@@ -81,7 +81,7 @@ class RunStats:
     krylov_iterations: int = 0
     last_rejection: str = ""
     energy_gains: int = 0  # implicit: steps accepted below 1e-3 dt_max although the energy grew
-    frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs left out (freeze_cycles)
+    frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs kept (freeze_cycles)
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
     def reject(self, exc: BaseException) -> None:
