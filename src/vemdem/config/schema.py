@@ -6,6 +6,8 @@ unknown keys, missing required keys, wrong types and impossible values.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import tomllib
 from dataclasses import dataclass
@@ -121,6 +123,33 @@ def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
                 raise ConfigError(f"{name}: {problem}, got {value!r}")
         out[key] = value
     return out
+
+
+def choices(cfg: dict, schema: dict) -> dict:
+    """The keys of a checked config that the run does not take from their defaults.
+
+    This is what makes a run this run, for `--resume` and for reusing a pack stage: a key added to
+    the schema later comes with the default that keeps the old behaviour, so the choices of an
+    unchanged config stay the same as the schema grows (a whole-config hash changed with every
+    new key and refused checkpoints of runs whose config nobody touched). Keys the schema does
+    not know (a stage's own bookkeeping) are kept."""
+    out = {}
+    for key, value in cfg.items():
+        spec = schema.get(key)
+        if isinstance(spec, dict) and isinstance(value, dict):
+            inner = choices(value, spec)
+            if inner:
+                out[key] = inner
+        elif isinstance(spec, TableList) and isinstance(value, list):
+            out[key] = [choices(item, spec.schema) for item in value]  # the count of tables is a choice too
+        elif not isinstance(spec, Field) or spec.default is REQUIRED or value != spec.default:
+            out[key] = value
+    return out
+
+
+def digest(obj) -> str:
+    """sha256 of a config-like object (sorted keys, so the order of keys in a file does not matter)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def load_toml(path: str | Path) -> dict:

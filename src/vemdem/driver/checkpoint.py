@@ -3,9 +3,9 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 import zipfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,31 +18,42 @@ class CheckpointError(ValueError):
     """A checkpoint is missing, unreadable or belongs to another config; str(e) names the file."""
 
 
-def config_fingerprint(cfg: dict) -> str:
-    return hashlib.sha256(json.dumps(cfg, sort_keys=True, default=str).encode()).hexdigest()
+@dataclass(frozen=True)
+class RunIdentity:
+    """What makes a run this run, for --resume: the config keys it does not take from their
+    defaults (`choices`, see config.choices) and their digest. `legacy` is the digest of the whole
+    checked config, which checkpoints written before the schema-growth rule carry: still accepted,
+    so that a run started then can be continued."""
+
+    fingerprint: str
+    choices: dict = field(default_factory=dict)
+    legacy: str = ""
 
 
-def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int, fingerprint: str):
+def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
+                    identity: RunIdentity):  # fmt: skip
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
     np.savez(tmp, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated, power=state.power,
              keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
-             krylov=stats.krylov_iterations, frame=frame, fingerprint=fingerprint,
+             krylov=stats.krylov_iterations, frame=frame, fingerprint=identity.fingerprint,
+             choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
              frozen_pair_steps=stats.frozen_pair_steps,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
 
-def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
+def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
     """(state, stats, frame) from a checkpoint; control.dt and easy_streak are restored in place."""
     if not path.is_file():
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
         with np.load(path, allow_pickle=False) as d:
-            if str(d["fingerprint"]) != fingerprint:
-                raise CheckpointError(f"--resume: {path} was written by a different config")
+            if str(d["fingerprint"]) not in (identity.fingerprint, identity.legacy):
+                then = json.loads(str(d["choices"])) if "choices" in d.files else None
+                raise CheckpointError(f"--resume: {path} was written by a different config{_changes(then, identity)}")
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
             bodies = {k.removeprefix("body_"): d[k] for k in d.files if k.startswith("body_")}
             state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]),
@@ -63,6 +74,34 @@ def load_checkpoint(path: Path, control: StepControl, fingerprint: str):
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
     return state, stats, frame
+
+
+def _changes(then: dict | None, identity: RunIdentity, shown: int = 3) -> str:
+    """' (key: value then, value now; ...)' for the first keys that differ, '' when unknown."""
+    if then is None:
+        return ""
+    old, new = _flat(then), _flat(identity.choices)
+    keys = sorted(k for k in old.keys() | new.keys() if old.get(k, "default") != new.get(k, "default"))
+    if not keys:
+        return ""
+    items = [f"{k}: {old.get(k, 'default')} then, {new.get(k, 'default')} now" for k in keys[:shown]]
+    more = f"; {len(keys) - shown} more" if len(keys) > shown else ""
+    return " (" + "; ".join(items) + more + ")"
+
+
+def _flat(tree, prefix: str = "") -> dict:
+    """{'solver.dt_max': 1e-4, 'grains[0].size': ...} from nested tables and arrays of tables."""
+    if isinstance(tree, dict):
+        out = {}
+        for k, v in tree.items():
+            out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+        return out
+    if isinstance(tree, list) and tree and all(isinstance(v, dict) for v in tree):
+        out = {f"{prefix}.count": len(tree)}
+        for i, v in enumerate(tree):
+            out.update(_flat(v, f"{prefix}[{i}]"))
+        return out
+    return {prefix: tree}
 
 
 def truncate_csv(path: Path, t_max: float):

@@ -21,7 +21,7 @@ from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
-from .checkpoint import load_checkpoint, save_checkpoint, truncate_csv
+from .checkpoint import RunIdentity, load_checkpoint, save_checkpoint, truncate_csv
 from .frames import FRAME_CSVS, FrameWriter
 
 
@@ -43,7 +43,7 @@ class Run:
 
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
-             fingerprint: str, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
+             identity: RunIdentity, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
              stop=None, control=None) -> Run:  # fmt: skip
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -52,7 +52,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
     ckpt = out_dir / "checkpoint.npz"
     n_frames = _n_frames(duration, every)
     if resume:
-        state, stats, frame = load_checkpoint(ckpt, steps, fingerprint)
+        state, stats, frame = load_checkpoint(ckpt, steps, identity)
         for name in FRAME_CSVS:
             truncate_csv(out_dir / name, state.t)
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
@@ -67,7 +67,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact)
-        save_checkpoint(ckpt, state, steps, stats, frame, fingerprint)
+        save_checkpoint(ckpt, state, steps, stats, frame, identity)
     last = {}
 
     def on_step(st, info, h):
@@ -85,7 +85,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             frame += 1
             last_contact = last["info"].contact
             writer.write(state, last["info"].strain_energy, last_contact)
-            save_checkpoint(ckpt, state, steps, stats, frame, fingerprint)
+            save_checkpoint(ckpt, state, steps, stats, frame, identity)
             if progress:
                 taken = stats.accepted - steps_before
                 rate = taken / max(time.perf_counter() - t_wall, 1e-9)

@@ -22,11 +22,11 @@ from ..analysis.force_strain import cycle_figures, plot_force_strain, write_forc
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_walls
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
 from ..solver.api import make_integrator
+from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
@@ -70,9 +70,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     scene = scene_from(initial.grains, cfg, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])) + [lid])
     integrator = make_integrator(solver_options_from(cfg), scene)
     every = 0.5 * duration / cfg["lid"]["frames"]
+    identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
-                      fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v,
+                      identity=identity, x0=initial.x, v0=initial.v,
                       friction0=initial.friction, resume=resume_here,
                       progress=progress)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
@@ -86,6 +87,6 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary.update(figures)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
-    summary["config_fingerprint"] = config_fingerprint(cfg)
+    summary["config_fingerprint"] = identity.fingerprint
     write_json(out_dir / "summary.json", summary)
     return summary

@@ -26,7 +26,6 @@ from ..config import ConfigError, tables
 from ..config.tables import SETTLING_DAMPING
 from ..config.build import resolve_path, scene_from, solver_options_from
 from ..contact.walls import box_walls
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..geometry.packing import column_packing
@@ -34,6 +33,7 @@ from ..io.results import write_json
 from ..io.state import GranularState, StateFileError, friction_arrays, load_state, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
+from .identity import run_identity
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.PACK
@@ -58,9 +58,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     scene = scene_from(packing.grains, cfg, box_walls(*packing.box))
     integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
-    fingerprint = config_fingerprint(cfg)
+    identity = run_identity(cfg, SCHEMA)
     result = simulate(scene, integrator, out_dir, duration=settle["max_time"], every=cfg["output"]["every"],
-                      vtk=cfg["output"]["vtk"], fingerprint=fingerprint, resume=resume, progress=progress,
+                      vtk=cfg["output"]["vtk"], identity=identity, resume=resume, progress=progress,
                       stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
     measures = pack_measures(scene.bodies.volume, scene.grain_centroids(state.x), packing.box)
@@ -84,7 +84,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["column_height"] = packing.column_height
     summary["state_file"] = "state.npz"
-    summary["config_fingerprint"] = fingerprint
+    summary["config_fingerprint"] = identity.fingerprint
     write_json(out_dir / "summary.json", summary)
     return summary
 
@@ -117,7 +117,8 @@ def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = F
     (kept); one from another config is refused. An interrupted stage is continued by resume."""
     pack_dir = Path(pack_dir)
     if (pack_dir / "summary.json").is_file():
-        if _stage_fingerprint(pack_dir) != config_fingerprint(pack_cfg):
+        identity = run_identity(pack_cfg, SCHEMA)
+        if _stage_fingerprint(pack_dir) not in (identity.fingerprint, identity.legacy):
             raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
                               "use another --out, or --overwrite to settle it again")  # fmt: skip
         return
@@ -155,8 +156,8 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     with the run."""
     meta = state.meta
     stage = dict(cfg, settle=dict(cfg["settle"], min_time=0.0), solver=dict(cfg["solver"], mass_damping=SETTLING_DAMPING))
-    fingerprint = config_fingerprint({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
-    if (folder / "summary.json").is_file() and _stage_fingerprint(folder) == fingerprint:
+    identity = run_identity({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
+    if (folder / "summary.json").is_file() and _stage_fingerprint(folder) == identity.fingerprint:
         return load_state(folder / "state.npz")
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)
@@ -164,13 +165,13 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     # lid_compression's output table has no `every` (its frames follow the lid): the pack's default
     every = cfg["output"].get("every", SCHEMA["output"]["every"].default)
     result = simulate(scene, integrator, folder, duration=stage["settle"]["max_time"], every=every,
-                      vtk=False, fingerprint=fingerprint, x0=state.x, v0=np.zeros_like(state.v),
+                      vtk=False, identity=identity, x0=state.x, v0=np.zeros_like(state.v),
                       friction0=state.friction, resume=resume and (folder / "checkpoint.npz").is_file(),
                       progress=label, stop=at_rest(scene, stage["settle"], integrator.lumped))  # fmt: skip
     new_meta = {**meta, "mass_scaling": scene.mass_scaling, "reequilibrated_from": meta.get("mass_scaling", 1.0)}
     save_state(folder / "state.npz", state.grains, result.state.x, result.state.v, new_meta,
                friction_arrays(result.state.history))  # fmt: skip
     summary = run_summary("reequilibrate", scene, result)
-    summary.update(settled=result.stopped_early, config_fingerprint=fingerprint)
+    summary.update(settled=result.stopped_early, config_fingerprint=identity.fingerprint)
     write_json(folder / "summary.json", summary)
     return load_state(folder / "state.npz")

@@ -24,13 +24,13 @@ from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls, corner_mirrors
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
 from ..io.state import friction_arrays, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
+from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
@@ -59,9 +59,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     scene = scene_from(initial.grains, cfg, standing_walls(meta, opened))
     integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
+    identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     result = simulate(scene, integrator, out_dir, duration=settle["max_time"], every=cfg["output"]["every"],
-                      vtk=cfg["output"]["vtk"], fingerprint=config_fingerprint(cfg), x0=initial.x, v0=initial.v,
+                      vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x, v0=initial.v,
                       friction0=initial.friction, resume=resume_here, progress=progress,
                       stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
@@ -86,6 +87,6 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary["settled"] = result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["initial_state"] = str(path)
-    summary["config_fingerprint"] = config_fingerprint(cfg)
+    summary["config_fingerprint"] = identity.fingerprint
     write_json(out_dir / "summary.json", summary)
     return summary

@@ -30,13 +30,13 @@ from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_sides, corner_mirrors, disc_wall
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
 from ..io.state import friction_arrays, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
+from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
@@ -95,10 +95,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     settle = dict(cfg["settle"], min_time=max(cfg["settle"]["min_time"], lift_time))
     # no friction history handed over: the pack's floor plane becomes the disc's triangles, and a
     # pair key of the plane would name a disc triangle here (contact.model.pair_keys)
-    fingerprint = config_fingerprint(cfg)
+    identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     result = simulate(scene, integrator, out_dir, duration=max(settle["max_time"], lift_time),
-                      every=cfg["output"]["every"], vtk=cfg["output"]["vtk"], fingerprint=fingerprint, x0=initial.x,
+                      every=cfg["output"]["every"], vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x,
                       v0=initial.v, resume=resume_here, progress=progress,
                       stop=at_rest(scene, settle, integrator.lumped))  # fmt: skip
     state = result.state
@@ -109,7 +109,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary["settled"] = result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["initial_state"] = str(path)
-    summary["config_fingerprint"] = fingerprint
+    summary["config_fingerprint"] = identity.fingerprint
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
                {**meta, "scenario": "poured_heap", "time": state.t, "disc_radius": cfg["disc"]["radius"]},
                friction_arrays(state.history))  # fmt: skip

@@ -64,10 +64,10 @@ def pack_stage(raw: dict) -> tuple[str, dict] | None:
     if "pack" not in module.SCHEMA or cfg.get("initial_state"):
         return None
     from . import pack
-    from ..driver.checkpoint import config_fingerprint
+    from .identity import run_identity
 
     config = pack.pack_config(cfg)
-    return config_fingerprint(config), config
+    return run_identity(config, pack.SCHEMA).fingerprint, config
 
 
 def settle_pack(config: dict, folder, progress=None) -> None:

@@ -13,11 +13,11 @@ from pathlib import Path
 
 from ..config import tables
 from ..config.build import build_scene, solver_options_from
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
 from ..solver.api import make_integrator
+from .identity import run_identity
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.SCENE
@@ -27,8 +27,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     t_start = time.perf_counter()
     scene, v0 = build_scene(cfg, base_dir)
     integrator = make_integrator(solver_options_from(cfg), scene)
+    identity = run_identity(cfg, SCHEMA)
     result = simulate(scene, integrator, out_dir, duration=cfg["duration"], every=cfg["output"]["every"],
-                      vtk=cfg["output"]["vtk"], fingerprint=config_fingerprint(cfg), v0=v0, resume=resume,
+                      vtk=cfg["output"]["vtk"], identity=identity, v0=v0, resume=resume,
                       progress=progress)  # fmt: skip
     summary = run_summary("scene", scene, result, t_start)
     write_json(Path(out_dir) / "summary.json", summary)

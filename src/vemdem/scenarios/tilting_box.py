@@ -55,13 +55,13 @@ from ..analysis.tilt import MIN_SURFACE_GRAINS, fit_surface, plot_tilt, surface_
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls, mirrored
-from ..driver.checkpoint import config_fingerprint
 from ..driver.loop import simulate
 from ..driver.summary import energy_balance, run_summary
 from ..io.results import write_json
 from ..io.state import friction_arrays, save_state
 from ..solver.api import make_integrator
 from .granular import kinetic_ratio, rest_energy
+from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz (and DIR/tilt.json)
@@ -171,9 +171,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     integrator = make_integrator(solver_options_from(cfg), scene)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
     tilt = Tilt(scene, cfg, meta, out_dir, integrator.lumped, resume_here)
-    fingerprint = config_fingerprint(cfg)
+    identity = run_identity(cfg, SCHEMA)
     result = simulate(scene, integrator, out_dir, duration=tilt.full_tilt_time + 2 * cfg["settle"]["max_time"],
-                      every=cfg["output"]["every"], vtk=cfg["output"]["vtk"], fingerprint=fingerprint, x0=initial.x,
+                      every=cfg["output"]["every"], vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x,
                       v0=initial.v, friction0=initial.friction, resume=resume_here, progress=progress,
                       stop=tilt.stop, control=tilt.control)  # fmt: skip
     state = result.state
@@ -183,7 +183,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary["settled"] = tilt.onset is not None and result.stopped_early
     summary["kinetic_ratio"] = kinetic_ratio(scene, state.v, integrator.lumped)
     summary["initial_state"] = str(path)
-    summary["config_fingerprint"] = fingerprint
+    summary["config_fingerprint"] = identity.fingerprint
     save_state(out_dir / "state.npz", initial.grains, state.x, state.v,
                {**meta, "scenario": "tilting_box", "time": state.t, "tilt_deg": tilt.angle(state.t)},
                friction_arrays(state.history))  # fmt: skip
