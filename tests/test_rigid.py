@@ -152,7 +152,7 @@ def test_a_cube_above_its_friction_angle_slides_at_coulombs_acceleration(integra
     assert measured == pytest.approx(expected, rel=0.03)
 
 
-def head_on(grain_model: str, integrator_name: str = "implicit", dt_max: float = 1e-4):
+def head_on(grain_model: str, integrator_name: str = "implicit", dt_max: float = 1e-4, freeze_cycles: bool = False):
     """Two cubes face to face, closing at 0.2 m/s, no gravity, light damping; centroid
     velocities after the impact. The flexible pair runs implicitly with the contact-impact step
     control (60 steps per contact half-period)."""
@@ -160,7 +160,7 @@ def head_on(grain_model: str, integrator_name: str = "implicit", dt_max: float =
     gap = 0.9 * law.activation_gap
     a, b = cube(SIZE), cube(SIZE).translated((SIZE + gap + 2e-5, 0.0, 0.0))
     scene = Scene.build([a, b], MATERIAL, law, friction, gravity=(0, 0, 0), grain_model=grain_model)
-    options = SolverOptions(integrator=integrator_name, impact_steps=60.0, dt_max=dt_max)
+    options = SolverOptions(integrator=integrator_name, impact_steps=60.0, dt_max=dt_max, freeze_cycles=freeze_cycles)
     integrator = make_integrator(options, scene)
     x = scene.bodies.reference
     v = np.zeros_like(x)
@@ -181,6 +181,13 @@ def test_head_on_collision_matches_the_flexible_grains(integrator, dt_max, rel):
     assert rigid == pytest.approx(flexible, rel=rel)
     assert abs(rigid[0]) <= 0.1  # no energy gained
     assert rigid.sum() == pytest.approx(0.0, abs=1e-9)  # momentum
+
+
+def test_frozen_cycling_pairs_leave_the_head_on_rebound_unchanged():
+    """`[solver] freeze_cycles` keeps a pair that cycles in and out of Newton's set; where its contact
+    was handed over to another record it must not count twice (contact.model._handed_over): without
+    that rule this rebound was 0.24 % faster (0.038360 against 0.038268 m/s; rigid 0.038270)."""
+    assert head_on("flexible", freeze_cycles=True) == pytest.approx(head_on("flexible"), rel=1e-6)
 
 
 def test_rigid_grains_take_either_integrator():

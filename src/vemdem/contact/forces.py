@@ -177,20 +177,29 @@ def force_on_side_a(ints, local_force) -> np.ndarray:
 
 
 @njit(cache=True)
-def contact_points(x, ints, floats):
-    """Contact point on side B of every pair (m, 3): sum of -w_i x_i over B's nodes (the nodes
-    after the vertex, or after the first edge). By role, not by the sign of w: a wall plane's
-    triangle is finite, and the projection of a vertex may lie outside it (weights of any sign)."""
-    out = np.zeros((len(ints), 3))
+def pair_points(x, ints, floats):
+    """The two closest points of every pair (m, 2, 3): [:, 0] on side A, sum of w_i x_i over A's
+    nodes (the vertex, or the first edge), [:, 1] on side B, sum of -w_i x_i over the others. By
+    role, not by the sign of w: a wall plane's triangle is finite, and the projection of a vertex
+    may lie outside it (weights of any sign)."""
+    out = np.zeros((len(ints), 2, 3))
     w0 = np.empty(6)
     D = np.empty((6, 2))
     for c in range(len(ints)):
         kind = ints[c, KIND]
         w = pair_weights(kind, floats[c, C0], floats[c, C1], w0, D)
-        for i in range(2 if kind == EDGE_EDGE else 1, N_NODES[kind]):
+        n_a = 2 if kind == EDGE_EDGE else 1
+        for i in range(N_NODES[kind]):
+            side = 0 if i < n_a else 1
+            sign = 1.0 if i < n_a else -1.0
             for a in range(3):
-                out[c, a] -= w[i] * x[ints[c, NODE0 + i], a]
+                out[c, side, a] += sign * w[i] * x[ints[c, NODE0 + i], a]
     return out
+
+
+def contact_points(x, ints, floats):
+    """Contact point on side B of every pair (m, 3) (pair_points)."""
+    return np.ascontiguousarray(pair_points(x, ints, floats)[:, 1])
 
 
 @njit(cache=True)

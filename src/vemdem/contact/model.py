@@ -26,6 +26,7 @@ from .forces import (
     force_on_side_a,
     gap_rates,
     local_tangent_matrix,
+    pair_points,
     scatter_local_forces,
     scatter_pair_tangents,
 )
@@ -286,7 +287,7 @@ class ContactModel:
     # ------------------------------------------------------------------ forces
     def potential(self, x, t, candidates, frozen=None) -> float:
         """The contact potential sum Phi(d) alone (no friction, no tangent): a line-search merit."""
-        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen)
+        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen, self.law.activation_gap)
         return evaluate_contacts(x_all, ints, floats, self.law_params, len(x_all), False).total_energy
 
     def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
@@ -295,7 +296,7 @@ class ContactModel:
 
         v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics.
         frozen: records kept whether or not the narrow phase finds them now (Newton's cycling pairs)."""
-        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen)
+        x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen, self.law.activation_gap)
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
         residual = conservative.force
@@ -390,14 +391,47 @@ class FrozenPairs:
     floats: np.ndarray
 
 
-def _with_frozen(x_all, ints, floats, frozen: FrozenPairs | None):
-    """The narrow phase's records plus the frozen ones it did not find."""
+# Two records of the same two grains whose closest points lie within this share of gbar of each
+# other on both sides describe one touching spot (gbar is the reach of the barrier): at a
+# hand-over (a vertex-face pair that became the vertex-edge pair at the face's edge) or where the
+# narrow phase finds an edge-edge pair at its edge's end beside the end vertex's own record.
+# In the 515-grain lid jam such near twins lay 0.0004-0.11 gbar apart, the records whose force no
+# other record carried 1.4-16 gbar (docs/dynamics.md).
+TWIN_FRACTION = 0.5
+
+
+def _with_frozen(x_all, ints, floats, frozen: FrozenPairs | None, gbar: float):
+    """The narrow phase's records plus the frozen ones it did not find and that twin no found record
+    (the same touching spot: its force is carried, adding it would count it twice)."""
     if frozen is None or not len(frozen.keys):
         return x_all, ints, floats
     missing = ~np.isin(frozen.keys, pair_keys(ints))
+    if missing.any():
+        missing[missing] = ~_twinned(x_all, frozen.ints[missing], frozen.floats[missing], ints, floats,
+                                     TWIN_FRACTION * gbar)  # fmt: skip
     if not missing.any():
         return x_all, ints, floats
     return x_all, np.vstack([ints, frozen.ints[missing]]), np.vstack([floats, frozen.floats[missing]])
+
+
+def _twinned(x_all, q_ints, q_floats, ints, floats, tol: float) -> np.ndarray:
+    """For each query record, whether a record of (ints, floats) between the same two grains has
+    the same two closest points (within tol, in either order of the sides)."""
+
+    def grain_key(rows):
+        lo, hi = np.minimum(rows[:, GRAIN_A], rows[:, GRAIN_B]), np.maximum(rows[:, GRAIN_A], rows[:, GRAIN_B])
+        return (lo << 32) | hi
+
+    q_key, key = grain_key(q_ints), grain_key(ints)
+    near = np.flatnonzero(np.isin(key, q_key))
+    if not len(near):
+        return np.zeros(len(q_ints), dtype=bool)
+    query = pair_points(x_all, q_ints, q_floats)[:, None]  # (query, 1, side, 3)
+    found = pair_points(x_all, ints[near], floats[near])[None, :]  # (1, near, side, 3)
+    direct = np.linalg.norm(found - query, axis=3).max(axis=2)
+    swapped = np.linalg.norm(found[:, :, ::-1] - query, axis=3).max(axis=2)
+    same_grains = key[near][None, :] == q_key[:, None]
+    return ((np.minimum(direct, swapped) <= tol) & same_grains).any(axis=1)
 
 
 def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
