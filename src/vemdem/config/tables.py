@@ -143,7 +143,8 @@ SOLVER = {
     "freeze_cycles": Field(
         bool, False,
         doc="implicit, flexible grains: keep a pair that leaves and rejoins Newton's contact set every other "
-            "iteration for the rest of the step (docs/dynamics.md; the 515-grain lid jam at the real density)",
+            "iteration for the rest of the step, unless another record carries its touching spot "
+            "(docs/dynamics.md; the 515-grain lid jam at the real density)",
     ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"

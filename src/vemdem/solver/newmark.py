@@ -76,10 +76,9 @@ class NewmarkParameters:
     # values and the step is rejected. With freeze_cycles such pairs are kept in the set for the rest of
     # the step (contact.model.FrozenPairs), the iteration converges, and the next step's search decides
     # afresh. (Leaving them out instead let Newton push their features together against the update
-    # bound: stuck at an update share of 1e-9, seen in the 515-grain lid jam.) Off by default: where a
-    # pair hands its force over to another record (a vertex crossing a face's edge) both are then
-    # kept and that force counts twice: a head-on impact of two cubes rebounded 0.24 % faster with it
-    # (tests/test_rigid.py), with it only in stalled iterations too.
+    # bound: stuck at an update share of 1e-9, seen in the 515-grain lid jam.) A kept pair that twins a
+    # found record (the same touching spot: a force handed over) is not added (contact.model._twinned).
+    # Off by default: with the twins left out it no longer speeds up the jam (docs/dynamics.md).
     freeze_cycles: bool = False
 
 
