@@ -29,6 +29,10 @@ class RunIdentity:
     choices: dict = field(default_factory=dict)
     legacy: str = ""
 
+    def accepts(self, stored: str | None) -> bool:
+        """Whether a fingerprint stored by a checkpoint or a stage's summary is this run's."""
+        return stored is not None and stored in (self.fingerprint, self.legacy)
+
 
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
                     identity: RunIdentity):  # fmt: skip
@@ -51,7 +55,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
         with np.load(path, allow_pickle=False) as d:
-            if str(d["fingerprint"]) not in (identity.fingerprint, identity.legacy):
+            if not identity.accepts(str(d["fingerprint"])):
                 then = json.loads(str(d["choices"])) if "choices" in d.files else None
                 raise CheckpointError(f"--resume: {path} was written by a different config{_changes(then, identity)}")
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))

@@ -117,8 +117,7 @@ def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = F
     (kept); one from another config is refused. An interrupted stage is continued by resume."""
     pack_dir = Path(pack_dir)
     if (pack_dir / "summary.json").is_file():
-        identity = run_identity(pack_cfg, SCHEMA)
-        if _stage_fingerprint(pack_dir) not in (identity.fingerprint, identity.legacy):
+        if not run_identity(pack_cfg, SCHEMA).accepts(_stage_fingerprint(pack_dir)):
             raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
                               "use another --out, or --overwrite to settle it again")  # fmt: skip
         return
@@ -157,7 +156,7 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     meta = state.meta
     stage = dict(cfg, settle=dict(cfg["settle"], min_time=0.0), solver=dict(cfg["solver"], mass_damping=SETTLING_DAMPING))
     identity = run_identity({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
-    if (folder / "summary.json").is_file() and _stage_fingerprint(folder) == identity.fingerprint:
+    if (folder / "summary.json").is_file() and identity.accepts(_stage_fingerprint(folder)):
         return load_state(folder / "state.npz")
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)
