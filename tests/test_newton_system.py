@@ -50,3 +50,27 @@ def test_blocks_plus_coupling_equal_the_sparse_sum():
     rows, cols = coupling.nonzero()
     grain_of_dof = np.repeat(scene.contact.topology.vertex_grain[: scene.n_vertices], 3)
     assert len(rows) > 0 and np.all(grain_of_dof[rows] != grain_of_dof[cols])
+
+
+def test_the_coupling_triplets_become_scipys_csr_matrix():
+    """csr_from_triplets (the coupling's assembly) against SciPy's COO -> CSR: duplicates summed
+    (many per entry, as pairs sharing nodes give), empty rows, explicit zeros, sorted columns."""
+    import scipy.sparse as sp
+
+    from vemdem.contact.forces import csr_from_triplets
+
+    rng = np.random.default_rng(3)
+    for m, n in ((0, 5), (1, 1), (40, 6), (3000, 90), (20000, 4000)):
+        rows, cols = rng.integers(0, n, m), rng.integers(0, n, m)
+        vals = rng.standard_normal(m)
+        vals[::7] = 0.0
+        indptr, indices, data = csr_from_triplets(rows, cols, vals, n)
+        ours = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+        theirs = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+        assert ours.has_sorted_indices
+        assert ours.nnz == theirs.nnz  # one entry per distinct (row, column), zeros kept
+        np.testing.assert_allclose(ours.toarray(), theirs.toarray(), rtol=0, atol=1e-12)
+    # one row, all duplicates: the sum, in input order
+    rows, cols, vals = np.zeros(4, np.int64), np.array([2, 0, 2, 2]), np.array([1.0, 5.0, 2.0, 3.0])
+    indptr, indices, data = csr_from_triplets(rows, cols, vals, 1)
+    assert list(indptr) == [0, 2] and list(indices) == [0, 2] and list(data) == [5.0, 6.0]

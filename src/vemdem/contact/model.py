@@ -22,6 +22,7 @@ from numba import njit
 from .broad import candidate_pairs, grain_boxes
 from .forces import (
     contact_points,
+    csr_from_triplets,
     evaluate_contacts,
     force_on_side_a,
     gap_rates,
@@ -175,7 +176,8 @@ class ContactResult:
                                       rows, cols, vals)  # fmt: skip
         else:
             m = 0
-        return sp.csr_matrix((vals[:m], (rows[:m], cols[:m])), shape=(3 * n, 3 * n))
+        indptr, indices, data = csr_from_triplets(rows[:m], cols[:m], vals[:m], 3 * n)
+        return sp.csr_matrix((data, indices, indptr), shape=(3 * n, 3 * n))
 
 
 class ContactModel:
