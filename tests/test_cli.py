@@ -119,3 +119,27 @@ def test_first_run_says_the_kernels_are_compiling(tmp_path, cli, monkeypatch):
     assert code == 0 and "compiling the numerical kernels" in err
     code, _, err = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "quiet", "--quiet")
     assert code == 0 and "compiling" not in err
+
+
+def test_long_frames_still_report_progress(tmp_path, monkeypatch):
+    """Between frames (minutes apart in a jammed lid cycle) the loop reports the step it is on,
+    at most every PROGRESS_EVERY_S of wall time; each frame still reports its own line."""
+    from vemdem.driver import loop
+    from vemdem.scenarios.registry import checked_config
+
+    raw = tomllib.loads(example_text("drop"))
+    raw["duration"], raw["output"] = 2e-3, {"every": 1e-3, "vtk": False}
+    cfg, module = checked_config(raw)
+    calls = []
+    monkeypatch.setattr(loop, "PROGRESS_EVERY_S", 0.0)
+    module.run(cfg, tmp_path / "out", progress=lambda done, total, text="": calls.append((done, total, text)))
+    inside = [c for c in calls if "inside frame" in c[2]]
+    frames = [c for c in calls if "steps/s" in c[2]]
+    assert [c[0] for c in frames] == [1, 2] and all(c[1] == 2 for c in calls)
+    assert inside and all(c[2].startswith("t = ") for c in inside)
+    # a step line carries the frame done so far: the bar never runs ahead of the frames written
+    assert [c[0] for c in inside] == sorted(c[0] for c in inside) and max(c[0] for c in inside) <= 1
+    monkeypatch.setattr(loop, "PROGRESS_EVERY_S", 1e9)
+    calls.clear()
+    module.run(cfg, tmp_path / "again", progress=lambda done, total, text="": calls.append((done, total, text)))
+    assert not [c for c in calls if "inside frame" in c[2]]

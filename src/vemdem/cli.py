@@ -93,9 +93,10 @@ def _progress_bar(quiet: bool):
                 bar["bar"].close()
             bar["bar"] = tqdm(total=total, file=sys.stderr, dynamic_ncols=True, leave=True)
         b = bar["bar"]
-        b.update(done - b.n)
-        if text:
-            b.set_postfix_str(text, refresh=False)
+        moved = done - b.n
+        b.update(moved)
+        if text:  # a line inside a frame (no count to move the bar) is drawn at once
+            b.set_postfix_str(text, refresh=moved == 0)
         if done >= total:
             b.close()
 

@@ -25,6 +25,11 @@ from .checkpoint import RunIdentity, load_checkpoint, save_checkpoint, truncate_
 from .frames import FRAME_CSVS, FrameWriter
 
 
+# Between frames, a progress line at most this often (wall seconds): a frame of a jammed lid cycle
+# takes minutes, and a bar that only moves per frame looks like a hang.
+PROGRESS_EVERY_S = 5.0
+
+
 class InitialStateError(ValueError):
     """The initial state is not admissible (a grain behind a wall): str(e) names the cause."""
 
@@ -68,12 +73,15 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact)
         save_checkpoint(ckpt, state, steps, stats, frame, identity)
-    last = {}
+    last = {"shown": time.perf_counter()}
 
     def on_step(st, info, h):
         last["info"] = info
         if control is not None:
             control(st, info)
+        if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
+            last["shown"] = time.perf_counter()
+            progress(frame, n_frames, f"t = {st.t:.6g} s, step {h:.2e} s (inside frame {frame + 1})")
 
     stopped = stop is not None and frame > 0 and stop(state)
     try:
@@ -92,6 +100,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
                 # the frame's mean step: its last one is cut to land on the frame's time
                 mean_dt = (state.t - t_before) / max(taken, 1)
                 progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, mean dt = {mean_dt:.2e} s")
+                last["shown"] = time.perf_counter()
             stopped = stop is not None and stop(state)
     finally:
         writer.close()
