@@ -93,9 +93,10 @@ def main(argv=None) -> None:
         newton = "-" if raw["solver"]["integrator"] == "explicit" else (
             f"{pack['newton_iterations_per_step']:.1f}, {s['newton_iterations_per_step']:.1f}")  # fmt: skip
         height, runout = s.get("pile_height"), s.get("runout")
+        per_step = 1e3 * wall / (pack["n_steps"] + s["n_steps"])
         print(f"| {name} | {pack['n_steps']:,} ({pack['n_rejected_steps']}) | {s['n_steps']:,} "
               f"({s['n_rejected_steps']}) | {newton} | {height * 1e3:.2f} | {runout * 1e3:.2f} | {wall:.1f} | "
-              f"{1e3 * wall / (pack['n_steps'] + s['n_steps']):.2f} | {wall / reference:.2f} |", flush=True)  # fmt: skip
+              f"{per_step:.2f} | {wall / reference:.2f} |", flush=True)  # fmt: skip
     if not (args.keep and args.out):
         shutil.rmtree(out / "warm-up", ignore_errors=True)
         for k in range(len(runs)):
