@@ -19,6 +19,7 @@ step; the milliseconds per step are the steadier figure.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import platform
@@ -44,7 +45,7 @@ PILE = {  # examples/pile.toml at 36f55cf (2026-11-23), the pile of issue 14's m
 
 
 def pile(integrator: str, mass_scaling: float, dt_max: float | None = None, max_time: float | None = None) -> dict:
-    raw = {k: dict(v) if isinstance(v, dict) else v for k, v in PILE.items()}
+    raw = copy.deepcopy(PILE)  # the nested [pack] tables too: a config check may fill them in
     raw["solver"] = {"integrator": integrator, "mass_scaling": mass_scaling}
     if dt_max is not None:
         raw["solver"]["dt_max"] = dt_max
