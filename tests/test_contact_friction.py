@@ -93,6 +93,31 @@ def test_penetrating_a_wall_is_an_error():
         model.evaluate(c.vertices - [0, 0, 2 * GAP], 0.0, np.zeros((0, 2), np.int64))
 
 
+def test_a_gap_within_round_off_is_a_penetration_not_a_division_by_zero():
+    """A lid closed on a vertex to 1e-18 m in the 515-grain jam, and the friction kernel divided by
+    the exact 0 its closest points' difference rounded to (ZeroDivisionError inside numba, a crash
+    instead of a rejected step). Gaps at or below TOUCHING_GAP switch gaps are a penetration."""
+    from vemdem.contact.model import TOUCHING_GAP
+
+    c, model = cube_on_floor()
+    x = c.vertices - [0, 0, GAP - 1e-19]  # bottom face 1e-19 m above the floor
+    history = model.evaluate(c.vertices, 0.0, model.search(c.vertices, 0.0)).trial_history
+    with pytest.raises(PenetrationError, match="within round-off"):
+        model.evaluate(x, 0.0, model.search(x, 0.0), history, v=np.zeros_like(x), a4=1e6, tangent=True)
+    # just above the floor the law still answers: a finite force
+    x = c.vertices - [0, 0, GAP - 10 * TOUCHING_GAP * LAW.switch_gap]
+    res = model.evaluate(x, 0.0, model.search(x, 0.0), history, v=np.zeros_like(x), a4=1e6, tangent=True)
+    assert np.all(np.isfinite(res.force)) and np.all(np.isfinite(res.pair_tangent))
+    # two grains face to face: the same rule
+    a = cube(1e-3)
+    b = cube(1e-3).translated((1e-3 + 1e-19, 0, 0))
+    pair = ContactModel(np.vstack([a.vertices, b.vertices]), [a.faces, b.faces], np.array([0, 8, 16]),
+                        np.array([1.0, 1.0]), LAW, FRICTION)  # fmt: skip
+    x = np.vstack([a.vertices, b.vertices])
+    with pytest.raises(PenetrationError, match="grains 0 and 1 touch"):
+        pair.evaluate(x, 0.0, pair.search(x, 0.0))
+
+
 def test_removed_and_moving_walls():
     c, model = cube_on_floor(motion=Motion(times=(0.0, 1.0), displacements=((0, 0, 0), (0, 0, -1e-3)), removed_at=2.0))
     x = c.vertices

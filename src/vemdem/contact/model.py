@@ -40,7 +40,14 @@ from .walls import MeshWall, PlaneWall
 
 
 class PenetrationError(FloatingPointError):
-    """A vertex is on the wrong side of a wall: the state is not admissible."""
+    """Two surfaces touch or a vertex is on the wrong side of a wall: the state is not admissible."""
+
+
+# A gap at or below TOUCHING_GAP switch gaps is contact: the barrier's force there (F_ref 1e18 and
+# more) is no longer a force, and the closest points' difference is round-off (the friction kernel
+# divided by an exact 0 when a lid had closed on a vertex to 1e-18 m, in the 515-grain jam). Such a
+# state is a penetration: the step is rejected and halved.
+TOUCHING_GAP = 1e-9
 
 
 @dataclass
@@ -75,12 +82,13 @@ def pair_keys(ints: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)  # serial: a few flops per vertex, less than a parallel region's start-up on a busy machine
-def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar):
+def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar, floor):
     """Vertex-face records of every vertex within gbar of a plane (planes in order, vertices in
     order within each). A plane's triangle starts at its point (x[node0]) and has orthogonal legs
     e1, e2 (_plane_frame), so the closest-point coordinates are plain projections, what
     vertex_face_lcp solves for a general triangle. Returns (ints, floats, wall, vertex): wall >= 0
-    names the first plane with a vertex on its wrong side, and vertex the deepest one there."""
+    names the first plane with a vertex on its wrong side or within `floor` of it, and vertex the
+    deepest one there."""
     P = len(node0)
     signed = np.empty((P, n_vertices))
     count = 0
@@ -96,7 +104,7 @@ def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar
                 deepest, at = d, v
             if d <= gbar:
                 count += 1
-        if deepest <= 0.0:
+        if deepest <= floor:
             return np.empty((0, INT_COLS), np.int64), np.empty((0, FLOAT_COLS)), w, at
     ints = np.full((count, INT_COLS), -1, np.int64)
     floats = np.empty((count, FLOAT_COLS))
@@ -259,8 +267,17 @@ class ContactModel:
         x_all = self.all_positions(x, t)
         gbar = self.law.activation_gap if reach is None else reach
         ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
+        if len(floats) and floats[:, GAP].min() <= self.touching_gap:
+            c = int(np.argmin(floats[:, GAP]))
+            raise PenetrationError(f"grains {ints[c, GRAIN_A]} and {ints[c, GRAIN_B]} touch (gap {floats[c, GAP]:.3g} m, "
+                                   f"within round-off of contact)")  # fmt: skip
         plane_ints, plane_floats = self._plane_pairs(x_all, t, gbar)
         return x_all, np.vstack([ints, plane_ints]), np.vstack([floats, plane_floats])
+
+    @property
+    def touching_gap(self) -> float:
+        """Gaps at or below this are contact for every purpose (TOUCHING_GAP)."""
+        return TOUCHING_GAP * self.law.switch_gap
 
     def approaching(self, x, v, t, reach: float):
         """(gap, gap rate, m_eq) of every pair closer than `reach` (the impact step limit)."""
@@ -280,10 +297,11 @@ class ContactModel:
         w = np.asarray(active, np.int64)
         ints, floats, bad, v = _plane_records(x_all, self.n_vertices, self.plane_node0 + 3 * w, self._plane_normals[w],
                                               self.n_grains + len(self.meshes) + w, self.plane_face_base + w,
-                                              self.topology.vertex_grain, gbar)  # fmt: skip
+                                              self.topology.vertex_grain, gbar, self.touching_gap)  # fmt: skip
         if bad >= 0:
             grain = self.topology.vertex_grain[v]
-            raise PenetrationError(f"vertex {v} (grain {grain}) is behind wall {self.planes[active[bad]].name!r}")
+            raise PenetrationError(f"vertex {v} (grain {grain}) is behind wall {self.planes[active[bad]].name!r} "
+                                   f"(or within round-off of it)")  # fmt: skip
         return ints, floats
 
     # ------------------------------------------------------------------ forces
@@ -301,6 +319,9 @@ class ContactModel:
         x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen, self.law.activation_gap)
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
+        if np.isinf(conservative.total_energy):  # a kept (frozen) record closed to 0: not a gap the law can carry
+            c = int(np.argmax(conservative.energy))
+            raise PenetrationError(f"grains {ints[c, GRAIN_A]} and {ints[c, GRAIN_B]} touch (a kept pair's gap reached 0)")
         residual = conservative.force
         pair_tangent = conservative.local_tangent if tangent else None
         keys = pair_keys(ints)
