@@ -118,6 +118,24 @@ def test_a_pair_out_in_out_is_frozen_with_the_record_it_had():
     np.testing.assert_array_equal(frozen.floats, seen_floats)
 
 
+def test_a_frozen_pair_left_out_for_its_twin_stays_frozen():
+    """A frozen pair that neither of the last two iterates' records hold (a twin carried its spot, so
+    contact.model._with_frozen left it out) stays frozen with its stored record. It used to be
+    dropped two iterations later, then rejoined the set, and the cycle began again: a 515-grain lid
+    jam step cycled for 40 iterations with a period of three and was rejected (session 17)."""
+    steady, toggling = (0, 1, 2), (2, 3, 4)
+    trail, frozen = [], None
+    for rows in ([steady, toggling], [steady], [steady, toggling]):
+        ints, floats = records(rows)
+        frozen = _freeze_cycling(trail, ints, floats, frozen)
+    stored = frozen.ints.copy(), frozen.floats.copy()
+    for _ in range(4):  # left out for its twin from here on
+        frozen = _freeze_cycling(trail, *records([steady]), frozen)
+        np.testing.assert_array_equal(frozen.keys, pair_keys(records([toggling])[0]))
+        np.testing.assert_array_equal(frozen.ints, stored[0])
+        np.testing.assert_array_equal(frozen.floats, stored[1])
+
+
 def test_pairs_that_join_or_leave_once_are_not_frozen():
     a, b, c = (0, 1, 2), (2, 3, 4), (1, 5, 6)
     trail, frozen = [], None

@@ -405,11 +405,19 @@ def _freeze_cycling(trail: list, ints: np.ndarray, floats: np.ndarray, frozen: F
     wanted = cycling if frozen is None else np.union1d(frozen.keys, cycling)
     if not len(wanted):
         return frozen
-    now = np.isin(k0, wanted)  # a frozen pair is always in the current records (found or kept)
+    now = np.isin(k0, wanted)
     before = np.isin(k1, wanted) & ~np.isin(k1, k0)
-    keys = np.concatenate([k0[now], k1[before]])
+    keys, ints_, floats_ = [k0[now], k1[before]], [i0[now], i1[before]], [f0[now], f1[before]]
+    if frozen is not None:
+        # a frozen pair in neither iterate's records (a twin carries its spot: contact.model._with_frozen)
+        # stays frozen with its stored record; dropped, it rejoined the set and the cycle began again
+        gone = ~np.isin(frozen.keys, np.concatenate(keys))
+        keys.append(frozen.keys[gone])
+        ints_.append(frozen.ints[gone])
+        floats_.append(frozen.floats[gone])
+    keys = np.concatenate(keys)
     order = np.argsort(keys)
-    return FrozenPairs(keys[order], np.vstack([i0[now], i1[before]])[order], np.vstack([f0[now], f1[before]])[order])
+    return FrozenPairs(keys[order], np.vstack(ints_)[order], np.vstack(floats_)[order])
 
 
 def step_limit(scene: Scene, state: State, control: StepControl) -> float:
