@@ -120,9 +120,9 @@ def test_a_pair_out_in_out_is_frozen_with_the_record_it_had():
 
 def test_a_frozen_pair_left_out_for_its_twin_stays_frozen():
     """A frozen pair that neither of the last two iterates' records hold (a twin carried its spot, so
-    contact.model._with_frozen left it out) stays frozen with its stored record. It used to be
-    dropped two iterations later, then rejoined the set, and the cycle began again: a 515-grain lid
-    jam step cycled for 40 iterations with a period of three and was rejected (session 17)."""
+    contact.model._with_frozen left it out) stays frozen with its stored record for the rest of the
+    step, as FrozenPairs promises: should the twin leave, the stored record carries the spot. It
+    used to be dropped from the frozen set two iterations later (session 17)."""
     steady, toggling = (0, 1, 2), (2, 3, 4)
     trail, frozen = [], None
     for rows in ([steady, toggling], [steady], [steady, toggling]):

@@ -410,7 +410,7 @@ def _freeze_cycling(trail: list, ints: np.ndarray, floats: np.ndarray, frozen: F
     keys, ints_, floats_ = [k0[now], k1[before]], [i0[now], i1[before]], [f0[now], f1[before]]
     if frozen is not None:
         # a frozen pair in neither iterate's records (a twin carries its spot: contact.model._with_frozen)
-        # stays frozen with its stored record; dropped, it rejoined the set and the cycle began again
+        # stays frozen with its stored record, which carries the spot if the twin leaves later in the step
         gone = ~np.isin(frozen.keys, np.concatenate(keys))
         keys.append(frozen.keys[gone])
         ints_.append(frozen.ints[gone])
