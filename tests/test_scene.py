@@ -176,3 +176,35 @@ def test_a_config_wall_can_be_frictionless(tmp_path):
     cfg, _ = checked_config(raw)
     planes, _ = build_walls(cfg["walls"])
     assert [p.frictionless for p in planes] == [True, False]
+
+
+@pytest.mark.parametrize("solver", INTEGRATORS, ids=IDS)
+def test_a_run_stopped_inside_a_frame_resumes_to_the_same_result(tmp_path, monkeypatch, solver):
+    """A frame of a jammed lid cycle takes up to an hour: the loop also checkpoints inside frames
+    (every CHECKPOINT_EVERY_S wall seconds, here after every step) where the integrator continues
+    bit for bit from there (implicit Newmark), at frames only where it does not."""
+    cfg = drop_config(duration=0.014, **solver)
+    scene_mod.run(cfg, tmp_path / "full")
+    monkeypatch.setattr(loop_mod, "CHECKPOINT_EVERY_S", 0.0)
+    original = loop_mod.save_checkpoint
+    saved = []
+
+    def interrupting(path, state, *args, **kwargs):
+        original(path, state, *args, **kwargs)
+        saved.append(state.t)
+        if state.t > 0.0085:  # after the impact began
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop_mod, "save_checkpoint", interrupting)
+    with pytest.raises(KeyboardInterrupt):
+        scene_mod.run(cfg, tmp_path / "cut")
+    monkeypatch.setattr(loop_mod, "save_checkpoint", original)
+    inside = [t for t in saved if abs(t / 1e-3 - round(t / 1e-3)) > 1e-6]
+    if IDS[INTEGRATORS.index(solver)] == "implicit":
+        assert inside and abs(saved[-1] / 1e-3 - round(saved[-1] / 1e-3)) > 1e-6  # it stopped inside a frame
+    else:
+        assert not inside
+    scene_mod.run(cfg, tmp_path / "cut", resume=True)
+    for name in ("grains.csv", "history.csv", "walls.csv"):
+        assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "full" / name).read_bytes()
+    assert len(list((tmp_path / "cut/grains").glob("*.vtu"))) == 15

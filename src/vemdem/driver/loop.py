@@ -3,7 +3,8 @@
     simulate(scene, integrator, out_dir, duration=, every=, ...) -> Run
 
 A frame (history.csv, grains.csv, walls.csv, ParaView) every `every` s up to `duration`, a
-checkpoint after each frame; after each frame `stop(state)` may end the run early (deterministic:
+checkpoint after each frame, and inside a frame at least every CHECKPOINT_EVERY_S wall seconds
+where the integrator resumes bit for bit from any step (implicit Newmark); after each frame `stop(state)` may end the run early (deterministic:
 a resumed run stops at the same frame); after every accepted step `control(state, info)` may act
 on the scene (e.g. move a servo wall from the reactions in `info.wall_reactions`), which is how
 stress-controlled tests drive their walls. Scenarios are short recipes over this loop.
@@ -28,6 +29,10 @@ from .frames import FRAME_CSVS, FrameWriter
 # Between frames, a progress line at most this often (wall seconds): a frame of a jammed lid cycle
 # takes minutes, and a bar that only moves per frame looks like a hang.
 PROGRESS_EVERY_S = 5.0
+
+# Inside a frame, a checkpoint at least this often (wall seconds): a frame of the 515-grain lid
+# cycle's jam took 20-80 minutes, all of it lost when the run was stopped before the frame's end.
+CHECKPOINT_EVERY_S = 600.0
 
 
 class InitialStateError(ValueError):
@@ -73,17 +78,29 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact)
         save_checkpoint(ckpt, state, steps, stats, frame, identity)
-    last = {"shown": time.perf_counter()}
+    last = {"shown": time.perf_counter(), "saved": time.perf_counter()}
+    # Only an integrator that carries nothing between its steps but the checkpointed state and step
+    # control continues bit for bit from a checkpoint written between two steps: the explicit ones
+    # renew their pair search at every `advance` call, so they checkpoint at frames only.
+    # A `control` hook may keep what it did since the last frame (the tilting box's gravity), which
+    # a checkpoint does not carry: such runs checkpoint at frames only too.
+    inside_frames = getattr(integrator, "checkpoints_inside_frames", False) and control is None
 
     def on_step(st, info, h):
         last["info"] = info
         if control is not None:
             control(st, info)
+        if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
+            # `frame` counts the frames written: a resumed run writes frame + 1 at its time
+            save_checkpoint(ckpt, st, steps, stats, frame, identity)
+            last["saved"] = time.perf_counter()
         if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
             last["shown"] = time.perf_counter()
             progress(frame, n_frames, f"t = {st.t:.6g} s, step {h:.2e} s (inside frame {frame + 1})")
 
-    stopped = stop is not None and frame > 0 and stop(state)
+    # `stop` is asked at frames only: a run resumed from inside a frame goes on to that frame's end
+    at_frame = state.t >= min(frame * every, duration) * (1 - 1e-12)
+    stopped = stop is not None and frame > 0 and at_frame and stop(state)
     try:
         while frame < n_frames and not stopped:
             t_next = min((frame + 1) * every, duration)
@@ -94,6 +111,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             last_contact = last["info"].contact
             writer.write(state, last["info"].strain_energy, last_contact)
             save_checkpoint(ckpt, state, steps, stats, frame, identity)
+            last["saved"] = time.perf_counter()
             if progress:
                 taken = stats.accepted - steps_before
                 rate = taken / max(time.perf_counter() - t_wall, 1e-9)

@@ -58,6 +58,9 @@ class Integrator(Protocol):
     name: str
     lumped: bool  # energies with the lumped mass (the explicit integrator's own)
     control: StepControl
+    # whether a run resumed from a checkpoint written between any two steps continues bit for bit
+    # (driver/loop.py then checkpoints inside long frames too)
+    checkpoints_inside_frames: bool
 
     def initial_state(self, x0=None, v0=None, history=None) -> State: ...
 
@@ -69,6 +72,7 @@ class ImplicitNewmark:
 
     name = "implicit"
     lumped = False
+    checkpoints_inside_frames = True  # advance() keeps nothing between steps but state and control
 
     def __init__(self, scene: Scene, options: SolverOptions):
         self.scene = scene
@@ -96,6 +100,7 @@ class ExplicitCentral:
 
     name = "explicit"
     lumped = True
+    checkpoints_inside_frames = False  # advance() renews the pair search at each call
     integrator_class = ExplicitIntegrator
 
     def __init__(self, scene: Scene, options: SolverOptions):
