@@ -278,15 +278,21 @@ def _features_near(x, A, lo, hi, vptr, fptr, eptr, fbox, ebox, proj, sign, bound
 
 
 @njit(cache=True)
-def _record(ints, floats, n, cap, kind, A, B, fa, fb, nodes, c0, c1, gap):
+def _record(ints, floats, n, cap, kind, A, B, fa, fb, n0, n1, n2, n3, c0, c1, gap):
+    """Row n of the records (nodes n0..n3, -1 where the kind has fewer; passed as scalars: an
+    array of them per record was an allocation per record)."""
     if n < cap:
         ints[n, KIND] = kind
         ints[n, GRAIN_A] = A
         ints[n, GRAIN_B] = B
         ints[n, FEATURE_A] = fa
         ints[n, FEATURE_B] = fb
-        for k in range(6):
-            ints[n, NODE0 + k] = nodes[k] if k < len(nodes) else -1
+        ints[n, NODE0] = n0
+        ints[n, NODE0 + 1] = n1
+        ints[n, NODE0 + 2] = n2
+        ints[n, NODE0 + 3] = n3
+        ints[n, NODE0 + 4] = -1
+        ints[n, NODE0 + 5] = -1
         floats[n, C0] = c0
         floats[n, C1] = c1
         floats[n, GAP] = gap
@@ -335,16 +341,16 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                     continue
                 d, u, v = _vf_gap(x, p, f, faces, gbar)
                 if d >= 0.0:
-                    nodes = np.array([p, faces[f, 0], faces[f, 1], faces[f, 2]])
-                    n = _record(ints, floats, n, cap, np.int64(VERTEX_FACE), ga, gb, p, f, nodes, u, v, d)
+                    n = _record(ints, floats, n, cap, np.int64(VERTEX_FACE), ga, gb, p, f, p, faces[f, 0], faces[f, 1],
+                                faces[f, 2], u, v, d)  # fmt: skip
     for ea in eA:
         for eb in eB:
             if not _boxes_near(ebox, ea, eb, gbar):
                 continue
             d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
             if d >= 0.0:
-                nodes = np.array([edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]])
-                n = _record(ints, floats, n, cap, np.int64(EDGE_EDGE), A, B, ea, eb, nodes, s, t, d)
+                n = _record(ints, floats, n, cap, np.int64(EDGE_EDGE), A, B, ea, eb, edges[ea, 0], edges[ea, 1],
+                            edges[eb, 0], edges[eb, 1], s, t, d)  # fmt: skip
     for side in range(2):
         verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
         for p in verts:
@@ -355,15 +361,16 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                 if d >= 0.0 and _vertex_edge_survives(
                     x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar
                 ):
-                    nodes = np.array([p, edges[e, 0], edges[e, 1]])
-                    n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, nodes, t, 0.0, d)
+                    n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
+                                np.int64(-1), t, 0.0, d)  # fmt: skip
     for p in vA:
         for q in vB:
             d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
             if d <= gbar and _vertex_vertex_survives(
                 x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar
             ):
-                n = _record(ints, floats, n, cap, np.int64(VERTEX_VERTEX), A, B, p, q, np.array([p, q]), 0.0, 0.0, d)
+                n = _record(ints, floats, n, cap, np.int64(VERTEX_VERTEX), A, B, p, q, p, q, np.int64(-1), np.int64(-1),
+                            0.0, 0.0, d)  # fmt: skip
     return n
 
 
