@@ -221,7 +221,8 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
 @njit(parallel=True, cache=True)
 def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                       local_tangent, stick_out, gt_out):  # fmt: skip
-    """Damping + friction residual of every pair and its analytic Jacobian (18 x 18)."""
+    """Damping + friction residual of every pair, and its analytic Jacobian (18 x 18) added to
+    local_tangent (which holds the pairs' conservative tangent: one array, not two and their sum)."""
     for c in prange(len(ints)):
         xs, vs = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
                              local_force, stick_out, gt_out)  # fmt: skip
@@ -242,9 +243,9 @@ def _dot3(u, v):  # narrow._dot, inlined here by name for the reader of this ker
 
 @njit(cache=True)
 def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out):
-    """d(residual)/d(x) of `dissipative_force` at xs (velocities vs there, v = vs + a4 dx): out
-    (18, 18), row 3 i + a the residual of node i's component a, column 3 p + b node p's coordinate b.
-    Forward mode, one column per node coordinate (module docstring for dc)."""
+    """d(residual)/d(x) of `dissipative_force` at xs (velocities vs there, v = vs + a4 dx), added to
+    out (18, 18): row 3 i + a the residual of node i's component a, column 3 p + b node p's
+    coordinate b. Forward mode, one column per node coordinate (module docstring for dc)."""
     nn = N_NODES[kind]
     m = N_COORDS[kind]
     n3 = 3 * nn
@@ -300,7 +301,6 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
     H01 = _dot3(J[:, 0], J[:, 1])
     H11 = _dot3(J[:, 1], J[:, 1])
     det = H00 * H11 - H01 * H01
-    out[:, :] = 0.0
     # every derivative vector lives in one buffer for all 3 nn columns: an array expression in this
     # loop allocates, and allocations were most of the kernel's time (64 -> 11 ms for the 7,356
     # pairs of the 515-grain lid jam, one thread)
@@ -371,7 +371,7 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
         for i in range(nn):
             dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
             for a in range(3):
-                out[3 * i + a, col] = -(dwi * force_on_a[a] + w[i] * dF[a])
+                out[3 * i + a, col] -= dwi * force_on_a[a] + w[i] * dF[a]
 
 
 @njit(parallel=True, cache=True)

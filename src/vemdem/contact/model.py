@@ -337,7 +337,9 @@ class ContactModel:
                 v_all[: self.n_vertices] = v
                 v_all[self.n_vertices :] = self._wall_velocities(t)
             local_force = np.zeros((len(ints), 6, 3))
-            local_tangent = np.zeros((len(ints), 18, 18)) if tangent else np.zeros((1, 18, 18))
+            # the dissipative tangent is added into the conservative one in place (19 MB per array
+            # at the 7,356 pairs of the 515-grain lid jam)
+            local_tangent = pair_tangent if tangent else np.zeros((1, 18, 18))
             _dissipative(self, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
                          local_force, local_tangent, stick_now, gt_now)  # fmt: skip
             extra = np.zeros_like(x_all)
@@ -346,8 +348,6 @@ class ContactModel:
             power = float(np.sum(extra * v_all))
             dissipative = extra[: self.n_vertices]
             local_forces = (conservative.local_force, local_force)
-            if tangent:
-                pair_tangent = pair_tangent + local_tangent
         reactions = self._wall_reactions(residual)
         N = self.n_vertices
         trial = ContactHistory(keys, floats[:, :2].copy(), gt_now, stick_now)
