@@ -255,3 +255,42 @@ def test_auto_holds_the_direct_solver_after_a_hand_over_and_tries_grain_block_ag
     solver.block.max_iterations = 1
     run(1 + solver.HOLD + 1)
     assert (solver.stats.fallbacks, solver.stats.held) == (4, 4 * solver.HOLD)
+
+
+def test_forcing_follows_eisenstat_walker():
+    """The Krylov tolerance of each Newton iteration (newmark._forcing): Eisenstat and Walker's
+    choice 2, 0.9 (|R_k| / |R_k-1|)^2, safeguarded by 0.9 eta_k-1^2 when that exceeds 0.1, and
+    kept between krylov_rtol and krylov_forcing."""
+    from vemdem.solver.newmark import NewmarkParameters, _forcing
+
+    p = NewmarkParameters(krylov_rtol=1e-8, krylov_forcing=0.1)
+    assert _forcing(p, 0.1, None, 1.0) == 0.1  # the first iteration: the loosest
+    assert _forcing(p, 0.1, 1.0, 0.1) == pytest.approx(0.9 * 0.01)  # 0.9 eta^2 = 0.009 < 0.1: no safeguard
+    assert _forcing(p, 0.1, 1.0, 1e-6) == 1e-8  # quadratic convergence: down to krylov_rtol
+    assert _forcing(p, 0.1, 1.0, 0.9) == 0.1  # a slow iteration: capped
+    loose = NewmarkParameters(krylov_rtol=1e-8, krylov_forcing=0.9)
+    assert _forcing(loose, 0.5, 1.0, 1e-3) == pytest.approx(0.9 * 0.25)  # safeguard: 0.9 * 0.5^2 > 0.1
+    assert _forcing(NewmarkParameters(krylov_rtol=1e-8, krylov_forcing=0.0), 0.1, 1.0, 0.5) == 1e-8  # off
+
+
+def test_inexact_newton_keeps_the_trajectory_and_saves_krylov_iterations():
+    """The three cubes of test_trajectories_agree_between_the_solvers with grain-block GMRES solved
+    to 1e-8 at every Newton iteration and with the Eisenstat-Walker forcing term: the same motion
+    (Newton's own tolerance, 1e-8 of the step's displacement, bounds what either leaves) in fewer
+    Krylov iterations."""
+    from vemdem.solver.newmark import NewmarkParameters, advance, initial_state
+    from vemdem.solver.state import StepControl
+
+    scene = touching_scene()
+    finals = []
+    for forcing in (0.0, 0.1):
+        params = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("grain-block"), krylov_forcing=forcing)
+        state, stats = advance(scene, initial_state(scene), 3e-3, StepControl(dt=1e-5, dt_max=1e-4), params)
+        finals.append((state.x, state.v, stats))
+    (x1, v1, s1), (x2, v2, s2) = finals
+    moved = np.abs(x1 - scene.bodies.reference).max()
+    assert moved > 1e-7
+    assert np.abs(x1 - x2).max() <= 1e-6 * moved
+    assert np.abs(v1 - v2).max() <= 1e-6 * np.abs(v1).max()
+    assert s2.krylov_iterations < 0.9 * s1.krylov_iterations  # 118 against 151 here
+    assert s2.newton_iterations <= 1.1 * s1.newton_iterations
