@@ -79,3 +79,30 @@ def test_a_step_that_would_tunnel_is_rejected_and_nothing_overlaps():
     assert stats.rejected > 0
     assert min(distances) > 0
     assert state.v[:8, 0].mean() < 0  # they met and bounced apart
+
+
+@pytest.mark.parametrize("grow_after", [1, 3])
+def test_the_step_grows_by_its_factor_after_grow_after_easy_steps(grow_after):
+    """A free fall converges in one or two Newton iterations: every step is easy, so from 1e-6 s
+    the steps are 1e-6 (grow_after times), then 1.5e-6 (grow_after times), 2.25e-6, ... until
+    dt_max; the `[solver] grow_after` key reaches the step control."""
+    from vemdem.scenarios.registry import checked_config, example_text
+    from vemdem.config.build import solver_options_from
+    from vemdem.solver.api import _control
+    import tomllib
+
+    raw = tomllib.loads(example_text("drop"))
+    raw["solver"]["grow_after"] = grow_after
+    cfg, _ = checked_config(raw)
+    control = _control(solver_options_from(cfg))
+    assert control.grow_after == grow_after
+    scene = drop_scene(5e-3)
+    control.dt, control.dt_max = 1e-6, 1e-5
+    steps = []
+    advance(scene, initial_state(scene), 3e-5, control, NewmarkParameters(0.3025, 0.6), lambda s, i, h: steps.append(h))
+    expected, h = [], 1e-6
+    while len(expected) < len(steps):
+        expected += [h] * grow_after
+        h = min(1.5 * h, 1e-5)
+    np.testing.assert_allclose(steps[:-1], expected[: len(steps) - 1], rtol=1e-9)  # the last lands on t_end
+    assert steps[-1] <= expected[len(steps) - 1] and sum(steps) == pytest.approx(3e-5)

@@ -138,7 +138,12 @@ SOLVER = {
     "easy_iterations": Field(
         int, 8, positive,
         "implicit, flexible grains: a step is easy when Newton converged in at most this many iterations; "
-        "after 3 easy steps in a row the step grows by 1.5",
+        "after grow_after easy steps in a row the step grows by 1.5",
+    ),
+    "grow_after": Field(
+        int, 3, positive,
+        "implicit, flexible grains: easy steps in a row after which the step grows by 1.5 (1: after every "
+        "easy step; the 515-grain lid jam at the real density, docs/dynamics.md)",
     ),
     "freeze_cycles": Field(
         bool, False,

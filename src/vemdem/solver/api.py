@@ -36,6 +36,7 @@ class SolverOptions:
     dt_max: float = 1e-4
     max_iterations: int = 15
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
+    grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
     freeze_cycles: bool = False  # implicit flexible: keep pairs that cycle in and out of Newton's set
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
@@ -151,7 +152,7 @@ class RigidImplicit(RigidCentral):
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
                        entry_fraction=o.entry_fraction, energy_growth=o.energy_growth,
-                       easy_iterations=o.easy_iterations)  # fmt: skip
+                       easy_iterations=o.easy_iterations, grow_after=o.grow_after)  # fmt: skip
 
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
