@@ -208,3 +208,33 @@ def test_additive_ccd_keeps_every_active_pair_apart_and_lets_sliding_pass(seed):
         for c, k in enumerate(ints[:, KIND]):
             d = ipctk_pair_distance(k, y[ints[c, NODE0 : NODE0 + N_NODES[k]]])
             assert d >= 0.2 * d0[c] * (1 - 1e-9)
+
+
+def test_additive_ccd_lets_a_long_slide_at_a_constant_gap_through():
+    """A small cube resting flat on a large one, a fifth of an activation gap above it, slides
+    0.2 mm sideways (about 100 of its gaps) without coming closer: additive CCD must let the whole
+    update through. Its rounds advance by 0.8 d / |dx| each (about 125 here); a cap of 64 rounds
+    stopped it at half the update, and Newton then crawled behind such pairs in the 515-grain lid
+    jam (docs/dynamics.md)."""
+    from vemdem.contact.ccd import accd_alpha
+    from vemdem.contact.pairs import GAP
+    from vemdem.geometry import cube
+
+    material = Material(90e9, 0.16, 2200.0)
+    law, friction = default_contact_laws(1e-3, material.E, material.density)
+    gap = law.activation_gap / 5
+    big = cube(1e-3)
+    small = cube(0.5e-3)
+    small = small.translated((0.0, 0.0, big.vertices[:, 2].max() - small.vertices[:, 2].min() + gap))
+    scene = Scene.build([big, small], material, law, friction, planes=[], gravity=(0, 0, -9.81))
+    contact, x = scene.contact, scene.bodies.reference.copy()
+    _, ints, floats = contact.pairs(x, 0.0, contact.search(x, 0.0))
+    assert len(ints) >= 4 and np.allclose(floats[:, GAP], gap, rtol=1e-6)
+    dx = np.zeros_like(x)
+    dx[scene.bodies.vertex_ptr[1] :, 0] = 2e-4
+    move = RigidRetraction(x, dx, scene.bodies.lumped, scene.bodies.vertex_ptr)
+    x_all = contact.all_positions(x, 0.0)
+    args = (ints, x_all, len(x), contact.plane_node0, dx, contact.topology.vertex_grain, move.c, move.t, move.phi,
+            move.excess(), 0.2, 1.0)  # fmt: skip
+    assert accd_alpha(*args) == 1.0
+    assert accd_alpha(*args, max_rounds=64) < 0.7  # the old cap
