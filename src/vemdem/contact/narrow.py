@@ -197,17 +197,14 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
     # H_cc^-1 and B H_cc^-1 B^T written out (m <= 2): np.linalg.inv and two BLAS products on 2 x 2
     # and 18 x 2 matrices cost more in calls and allocations than in flops (27 -> 9 ms for the 7,356
     # pairs of the 515-grain lid jam, one thread)
-    J00 = J01 = J10 = J11 = J20 = J21 = 0.0
+    J = np.zeros((3, 2))  # dg/dc
     for i in range(nn):
-        J00 += D[i, 0] * xs[i, 0]
-        J10 += D[i, 0] * xs[i, 1]
-        J20 += D[i, 0] * xs[i, 2]
-        J01 += D[i, 1] * xs[i, 0]
-        J11 += D[i, 1] * xs[i, 1]
-        J21 += D[i, 1] * xs[i, 2]
-    h00 = 2.0 * (J00 * J00 + J10 * J10 + J20 * J20)
-    h01 = 2.0 * (J00 * J01 + J10 * J11 + J20 * J21)
-    h11 = 2.0 * (J01 * J01 + J11 * J11 + J21 * J21)
+        for a in range(3):
+            J[a, 0] += D[i, 0] * xs[i, a]
+            J[a, 1] += D[i, 1] * xs[i, a]
+    h00 = 2.0 * _dot(J[:, 0], J[:, 0])
+    h01 = 2.0 * _dot(J[:, 0], J[:, 1])
+    h11 = 2.0 * _dot(J[:, 1], J[:, 1])
     if m == 2:
         det = h00 * h11 - h01 * h01
         i00, i01, i11 = h11 / det, -h01 / det, h00 / det
@@ -220,10 +217,8 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
     gq = np.zeros(18)
     for i in range(nn):
         for a in range(3):
-            Ja0 = J00 if a == 0 else (J10 if a == 1 else J20)
-            Ja1 = J01 if a == 0 else (J11 if a == 1 else J21)
-            b0[3 * i + a] = 2.0 * (D[i, 0] * g[a] + w[i] * Ja0)
-            b1[3 * i + a] = 2.0 * (D[i, 1] * g[a] + w[i] * Ja1)
+            b0[3 * i + a] = 2.0 * (D[i, 0] * g[a] + w[i] * J[a, 0])
+            b1[3 * i + a] = 2.0 * (D[i, 1] * g[a] + w[i] * J[a, 1])
             gq[3 * i + a] = 2.0 * w[i] * g[a]
     for r in range(n3):
         # (B H^-1) row r
