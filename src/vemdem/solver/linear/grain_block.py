@@ -12,10 +12,10 @@ helps):
     y_1    = Z A_c^-1 Z^T r                       coarse correction
     y      = y_1 + B^-1 (r - K y_1)               block solve of what is left
 
-B^-1 is a batched dense LU of every grain's block (compiled, parallel over grains: 100 ms for 515
-blocks of 90 x 90 on 2 cores (60 ms standalone), against 160 ms for NumPy's batched inverse and 250 ms for LAPACK
-called per block from numba; refactorised at every Newton iteration: a kept one costs 17-26
-GMRES iterations). GMRES solves K P^-1 u = b, x = P^-1 u,
+B^-1 is a batched dense LU of every grain's block (LAPACK's dgetrf per block, parallel over
+grains: 55 ms for 515 blocks of 90 x 90 on one thread against 90-107 ms for our own compiled LU and
+160 ms for NumPy's batched inverse, docs/linear-solvers.md; refactorised at every Newton
+iteration: a kept one costs 17-26 GMRES iterations). GMRES solves K P^-1 u = b, x = P^-1 u,
 to ||b - K x|| <= rtol ||b||, the tolerance the caller ties to Newton's progress.
 """
 
@@ -26,74 +26,78 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit, prange, types
 
 from .base import LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
 from .direct import superlu
 
 
-@njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
+# LAPACK's dgetrf, through numba's own wrapper (the one behind np.linalg.inv in compiled code):
+# a C symbol resolved by name, so the kernels that call it stay cacheable (a ctypes pointer would
+# not be). The wrapper fetches the LAPACK routine under the GIL on its first call, so the kernel
+# makes one call on the calling thread before its parallel loop (a worker thread asking for the
+# GIL the caller holds would wait for ever).
+_GETRF = types.ExternalFunction(
+    "numba_xxgetrf",
+    types.intc(types.char, types.intp, types.intp, types.CPointer(types.float64), types.intp,
+               types.CPointer(types.int32)),
+)  # fmt: skip
+_DOUBLE = ord("d")
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
 def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad):
-    """In-place LU with partial pivoting of a copy of every block (2D views: the row updates
-    vectorise); bad[g] = 1 marks a singular block."""
+    """LU with partial pivoting of every block (LAPACK dgetrf on a copy); bad[g] = 1 marks a
+    singular block (a pivot below 1e-15 of the block's largest entry, or not finite).
+
+    The blocks are stored by rows and LAPACK reads by columns, so each factorisation is of the
+    block's transpose, B_g^T = P L U; `_lu_solve_blocks` solves with B_g = U^T L^T P^T."""
+    one = np.ones(1)
+    one_piv = np.empty(1, np.int32)
+    _GETRF(_DOUBLE, 1, 1, one.ctypes, 1, one_piv.ctypes)
     for g in prange(len(dof_ptr) - 1):
         n = dof_ptr[g + 1] - dof_ptr[g]
         b0, p0 = block_ptr[g], dof_ptr[g]
-        A = lu[b0 : b0 + n * n].reshape(n, n)
-        A[:, :] = blocks[b0 : b0 + n * n].reshape(n, n)
-        scale = np.abs(A).max()
+        scale = 0.0
+        for k in range(n * n):
+            v = blocks[b0 + k]
+            lu[b0 + k] = v
+            scale = max(scale, abs(v))
+        _GETRF(_DOUBLE, n, n, lu[b0 : b0 + n * n].ctypes, n, piv[p0 : p0 + n].ctypes)
         for k in range(n):
-            p = k
-            best = abs(A[k, k])
-            for i in range(k + 1, n):
-                if abs(A[i, k]) > best:
-                    best = abs(A[i, k])
-                    p = i
-            piv[p0 + k] = p
-            if not best > 1e-15 * scale:
+            if not abs(lu[b0 + k * (n + 1)]) > 1e-15 * scale:
                 bad[g] = 1
                 break
-            if p != k:
-                for j in range(n):
-                    t = A[k, j]
-                    A[k, j] = A[p, j]
-                    A[p, j] = t
-            inv = 1.0 / A[k, k]
-            for i in range(k + 1, n):
-                A[i, k] *= inv
-            pivot_row = A[k, k + 1 :].copy()  # a separate array: the row updates vectorise (1.7x)
-            for i in range(k + 1, n):
-                f = A[i, k]
-                row = A[i, k + 1 :]
-                for j in range(n - k - 1):
-                    row[j] -= f * pivot_row[j]
 
 
 @njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
 def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out):
+    """out_g = B_g^-1 r_g from `_lu_blocks`' factors: U^T y = r (U^T is the lower triangle of the
+    stored rows), L^T z = y (the strict upper one, unit diagonal), then LAPACK's row interchanges
+    undone in reverse order."""
     for g in prange(len(dof_ptr) - 1):
         n = dof_ptr[g + 1] - dof_ptr[g]
         b0, p0 = block_ptr[g], dof_ptr[g]
         A = lu[b0 : b0 + n * n].reshape(n, n)
         y = r[p0 : p0 + n].copy()
-        for k in range(n):
-            p = piv[p0 + k]
-            if p != k:
-                t = y[k]
-                y[k] = y[p]
-                y[p] = t
-        for i in range(n):  # row views and a separate sum: the dot products vectorise (7.5 -> 6.2 ms)
+        for i in range(n):  # row views and a separate sum: the dot products vectorise
             row = A[i]
             s = 0.0
             for j in range(i):
                 s += row[j] * y[j]
-            y[i] -= s
+            y[i] = (y[i] - s) / row[i]
         for i in range(n - 1, -1, -1):
             row = A[i]
             s = 0.0
             for j in range(i + 1, n):
                 s += row[j] * y[j]
-            y[i] = (y[i] - s) / row[i]
+            y[i] -= s
+        for k in range(n - 1, -1, -1):
+            p = piv[p0 + k] - 1  # LAPACK's pivots count from 1
+            if p != k:
+                t = y[k]
+                y[k] = y[p]
+                y[p] = t
         out[p0 : p0 + n] = y
 
 
@@ -303,7 +307,7 @@ class GrainBlockSolver:
         self.system = s = system
         if getattr(self, "_lu", None) is None or self._lu.shape != s.blocks.shape:  # kept: no page faults
             self._lu = np.empty_like(s.blocks)
-            self._piv = np.empty(s.n, np.int64)
+            self._piv = np.empty(s.n, np.int32)
         bad = np.zeros(s.n_bodies, np.int64)
         _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad)
         if bad.any():
