@@ -89,6 +89,8 @@ def _linear(integrator) -> dict | None:
             # auto: systems handed to the direct solver after GMRES failed, and those sent there
             # straight after a hand-over (solver/linear/__init__.py AutoSolver)
             "fallbacks": stats.fallbacks, "held": stats.held,
+            # grain-block: solves that ended at GMRES's attainable accuracy (grain_block.STALL_ACCEPT)
+            "stalled": stats.stalled,
             "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
 
 

@@ -112,6 +112,7 @@ class SolverStats:
     last_iterations: int = 0
     fallbacks: int = 0  # auto: systems handed to the direct solver after the iterative one failed
     held: int = 0  # auto: systems sent straight to the direct solver after a hand-over (AutoSolver)
+    stalled: int = 0  # grain-block: solves ended at GMRES's attainable accuracy (grain_block.STALL_ACCEPT)
 
 
 class LinearSolver(Protocol):
