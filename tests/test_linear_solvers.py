@@ -302,8 +302,6 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     """The batched LAPACK factorisation (of each block's transpose, stored by rows) against NumPy's
     solve block by block, on blocks that need row interchanges (zero diagonal entries); a block
     with two equal rows or a NaN is flagged, the others are not."""
-    from vemdem.solver.linear.grain_block import _lu_blocks, _lu_solve_blocks
-
     rng = np.random.default_rng(3)
     sizes = np.array([3, 12, 30, 90, 57, 6])
     dof_ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
@@ -315,10 +313,10 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
         mats.append(A)
     blocks = np.concatenate([A.ravel() for A in mats])
     lu, piv, bad = np.empty_like(blocks), np.empty(dof_ptr[-1], np.int32), np.zeros(len(sizes), np.int64)
-    _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad)
+    grain_block._lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad)
     assert not bad.any()
     r, out = rng.normal(size=dof_ptr[-1]), np.empty(dof_ptr[-1])
-    _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out)
+    grain_block._lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out)
     for g, A in enumerate(mats):
         part = slice(dof_ptr[g], dof_ptr[g + 1])
         np.testing.assert_allclose(out[part], np.linalg.solve(A, r[part]), rtol=1e-8, atol=1e-10)
@@ -328,7 +326,7 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     B[7] = B[11]
     broken[block_ptr[4] + 100] = np.nan
     bad[:] = 0
-    _lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad)
+    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad)
     assert np.flatnonzero(bad).tolist() == [2, 4]
 
 

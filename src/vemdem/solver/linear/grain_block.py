@@ -360,9 +360,7 @@ class GrainBlockSolver:
                 if beta <= STALL_ACCEPT * bnorm:
                     self.stats.stalled += 1
                     break
-                self.stats.iterations += total
-                self.stats.last_iterations = total
-                raise LinearSolveDiverged(f"GMRES stalled at a relative residual {beta / bnorm:.2e} after {total} "
+                raise self._failed(total, f"GMRES stalled at a relative residual {beta / bnorm:.2e} after {total} "
                                           f"iterations (asked {rtol:.1e})")  # fmt: skip
             beta_before = beta
             m = self.restart
@@ -400,9 +398,7 @@ class GrainBlockSolver:
             r = b - s.matvec(x)
             if total >= self.max_iterations:
                 if np.linalg.norm(r) > rtol * bnorm:
-                    self.stats.iterations += total  # spent, though in vain: the run's Krylov count is the work done
-                    self.stats.last_iterations = total
-                    raise LinearSolveDiverged(f"GMRES reached a relative residual {np.linalg.norm(r) / bnorm:.2e} "
+                    raise self._failed(total, f"GMRES reached a relative residual {np.linalg.norm(r) / bnorm:.2e} "
                                               f"after {total} iterations (asked {rtol:.1e})")  # fmt: skip
                 break
         if not np.all(np.isfinite(x)):
@@ -410,3 +406,10 @@ class GrainBlockSolver:
         self.stats.iterations += total
         self.stats.last_iterations = total
         return x
+
+    def _failed(self, total: int, message: str) -> LinearSolveDiverged:
+        """The failure of a solve that spent `total` iterations, counted: spent in vain, they are
+        still the run's Krylov work."""
+        self.stats.iterations += total
+        self.stats.last_iterations = total
+        return LinearSolveDiverged(message)
