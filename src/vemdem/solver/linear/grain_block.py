@@ -403,13 +403,15 @@ class GrainBlockSolver:
                 break
         if not np.all(np.isfinite(x)):
             raise SingularSystemError("singular tangent: GMRES returned non-finite values")
+        self._count(total)
+        return x
+
+    def _count(self, total: int):
         self.stats.iterations += total
         self.stats.last_iterations = total
-        return x
 
     def _failed(self, total: int, message: str) -> LinearSolveDiverged:
         """The failure of a solve that spent `total` iterations, counted: spent in vain, they are
         still the run's Krylov work."""
-        self.stats.iterations += total
-        self.stats.last_iterations = total
+        self._count(total)
         return LinearSolveDiverged(message)
