@@ -89,7 +89,7 @@ def quieted(case, seconds: float):
     """The case carried on implicitly for `seconds` with the pack stage's mass damping (20 1/s):
     a pack settled by the scenario's rule still has surface grains rolling at cm/s, so a long step
     from it is a step of colliding grains; 0.09 s of this leaves the fastest vertex of the
-    515-grain pack at about 1 mm/s (docs/dynamics.md)."""
+    515-grain pack at 9e-6 m/s (docs/dynamics.md)."""
     name, scene, state = case
     if seconds <= 0.0:
         return case
