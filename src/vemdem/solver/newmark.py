@@ -48,7 +48,7 @@ class NewmarkParameters:
     beta: float = 0.3
     gamma: float = 0.5
     rtol: float = 1e-6  # residual, relative to the largest of gravity, inertia and contact forces
-    xtol: float = 1e-8  # correction, relative to the step's displacement (floor: 1e-6 grain size)
+    xtol: float = 1e-8  # correction, relative to the step's displacement (floor: 1e-12 grain sizes)
     max_iterations: int = 15
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
@@ -348,7 +348,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         # before is shortened.
         dx_norm = np.abs(dx).max()
         r_tol = params.rtol * scale
-        dx_tol = params.xtol * max(np.abs(du).max(), 1e-6 * size)
+        dx_tol = max(params.xtol * np.abs(du).max(), 1e-12 * size)
         if params.accuracy > 0:
             dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         if (at_end and it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
