@@ -167,8 +167,13 @@ def test_lid_compression_cycle(tmp_path, settled):
     assert summary["hysteresis_energy"] > 0
     assert summary["peak_force"] == pytest.approx(force.max())
     assert 0 <= summary["residual_strain"] <= strain.max()
-    # the lid's work is not in the energy books: no balance error that would only measure it
-    assert summary["energy"]["balance_error"] is None and "walls moved" in summary["energy"]["balance_error_reason"]
+    # the lid's work is in the energy books (history.csv wall_work, summed step by step), and they
+    # close (measured -0.6 %). Over the cycle that work is about the area between the loading and
+    # unloading curves, which force_strain measures from the 40 frames alone (measured: 0.0383
+    # against 0.0346 J; the frames sample a force that fluctuates between them)
+    books = summary["energy"]
+    assert books["wall_work"] == pytest.approx(summary["hysteresis_energy"], rel=0.2)
+    assert abs(books["balance_error"]) < 0.01
 
 
 def test_lid_above_the_pack_is_required(tmp_path, settled):

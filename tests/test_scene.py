@@ -36,7 +36,7 @@ def test_scene_outputs_follow_the_contract(tmp_path):
         assert key in summary
     assert json.loads((tmp_path / "summary.json").read_text())["n_grains"] == 2
     history = rows(tmp_path / "history.csv")
-    assert history[0] == ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts"]
+    assert history[0] == ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work"]
     assert len(history) == 1 + 5  # t = 0 and four frames
     grains = rows(tmp_path / "grains.csv")
     assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]

@@ -34,17 +34,33 @@ class RunIdentity:
         return stored is not None and stored in (self.fingerprint, self.legacy)
 
 
+@dataclass
+class WallWork:
+    """The work the moving walls did on the grains since the run began (history.csv "wall_work"):
+    the trapezoidal rule of each step (ContactModel.wall_work), so the grains' force on the walls
+    at the last step (`force`, at time `t`) is carried to the next, and through checkpoints."""
+
+    work: float
+    force: np.ndarray  # (n_walls, 3) force of the grains on each wall at t
+    t: float
+
+    def add(self, contact, t: float, force: np.ndarray) -> None:
+        self.work += contact.wall_work(self.t, t, self.force, force)
+        self.force, self.t = force, t
+
+
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
-                    identity: RunIdentity):  # fmt: skip
+                    identity: RunIdentity, walls: WallWork | None = None):  # fmt: skip
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
+    books = {} if walls is None else {"wall_work": walls.work, "wall_force": walls.force, "wall_t": walls.t}
     np.savez(tmp, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated, power=state.power,
              keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
              krylov=stats.krylov_iterations, frame=frame, fingerprint=identity.fingerprint,
              choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
-             frozen_pair_steps=stats.frozen_pair_steps,
+             frozen_pair_steps=stats.frozen_pair_steps, **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -78,6 +94,15 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
     return state, stats, frame
+
+
+def load_wall_work(path: Path) -> WallWork | None:
+    """The walls' work book of a checkpoint; None for one written before session 21 (the book then
+    starts again at the resume)."""
+    with np.load(path, allow_pickle=False) as d:
+        if "wall_work" not in d.files:
+            return None
+        return WallWork(float(d["wall_work"]), d["wall_force"].copy(), float(d["wall_t"]))
 
 
 def _changes(then: dict | None, identity: RunIdentity, shown: int = 3) -> str:

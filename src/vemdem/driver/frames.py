@@ -12,7 +12,8 @@ from ..io.vtk import PvdSeries
 from ..model.scene import Scene
 from ..solver.state import State
 
-HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts"]
+# wall_work: the work the moving walls did on the grains since the start (J; driver.checkpoint.WallWork)
+HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work"]
 GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
 WALLS_HEADER = ["time", "wall", "name", "fx", "fy", "fz"]  # force of the grains on each wall (N)
 FRAME_CSVS = ("history.csv", "grains.csv", "walls.csv")
@@ -33,10 +34,10 @@ class FrameWriter:
         self.faces = scene.contact.topology.faces[:n_grain_faces]
         self.face_grain = scene.contact.topology.face_grain[:n_grain_faces]
 
-    def write(self, state: State, strain: float, contact_result):
+    def write(self, state: State, strain: float, contact_result, wall_work: float = 0.0):
         s = self.scene
         self.history.write(state.t, s.kinetic_energy(state.v, self.lumped), strain, s.gravity_energy(state.x, self.lumped),
-                           contact_result.energy, state.dissipated, contact_result.n_contacts)  # fmt: skip
+                           contact_result.energy, state.dissipated, contact_result.n_contacts, wall_work)  # fmt: skip
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
         self.grains.write_rows([[state.t, g, *c[g], *vc[g]] for g in range(s.n_grains)])

@@ -22,7 +22,7 @@ from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
-from .checkpoint import RunIdentity, load_checkpoint, save_checkpoint, truncate_csv
+from .checkpoint import RunIdentity, WallWork, load_checkpoint, load_wall_work, save_checkpoint, truncate_csv
 from .frames import FRAME_CSVS, FrameWriter
 
 
@@ -67,6 +67,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             truncate_csv(out_dir / name, state.t)
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
+        walls = load_wall_work(ckpt) or WallWork(0.0, last_contact.wall_reactions, state.t)
     else:
         try:
             history = ContactHistory(**friction0) if friction0 is not None else None
@@ -76,8 +77,9 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         stats, frame = RunStats(), 0
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
-        writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact)
-        save_checkpoint(ckpt, state, steps, stats, frame, identity)
+        walls = WallWork(0.0, last_contact.wall_reactions, state.t)
+        writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact, walls.work)
+        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls)
     last = {"shown": time.perf_counter(), "saved": time.perf_counter()}
     # Only an integrator that carries nothing between its steps but the checkpointed state and step
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
@@ -88,11 +90,12 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
 
     def on_step(st, info, h):
         last["info"] = info
+        walls.add(scene.contact, st.t, info.wall_reactions)
         if control is not None:
             control(st, info)
         if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
             # `frame` counts the frames written: a resumed run writes frame + 1 at its time
-            save_checkpoint(ckpt, st, steps, stats, frame, identity)
+            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls)
             last["saved"] = time.perf_counter()
         if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
             last["shown"] = time.perf_counter()
@@ -109,8 +112,8 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             state, stats = integrator.advance(state, t_next, on_step, stats)
             frame += 1
             last_contact = last["info"].contact
-            writer.write(state, last["info"].strain_energy, last_contact)
-            save_checkpoint(ckpt, state, steps, stats, frame, identity)
+            writer.write(state, last["info"].strain_energy, last_contact, walls.work)
+            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls)
             last["saved"] = time.perf_counter()
             if progress:
                 taken = stats.accepted - steps_before

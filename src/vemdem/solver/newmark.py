@@ -477,18 +477,6 @@ def _wall_reactions_at(scene: Scene, state: State) -> np.ndarray:
     return contact.evaluate(state.x, state.t, contact.search(state.x, state.t), state.history, v=state.v).wall_reactions
 
 
-def wall_work(scene: Scene, t0: float, t1: float, reactions0: np.ndarray, reactions1: np.ndarray) -> float:
-    """Work of the walls' prescribed motion on the grains from t0 to t1: minus the grains' force on
-    each wall (the mean of its values at t0 and t1, the trapezoidal rule of the step) dotted with
-    the wall's displacement. Zero where no wall moves."""
-    contact = scene.contact
-    walls = contact.meshes + contact.planes  # the order of ContactResult.wall_reactions
-    if not any(w.motion.moves for w in walls):
-        return 0.0
-    shift = np.array([w.motion.displacement(t1) - w.motion.displacement(t0) for w in walls]).reshape(-1, 3)
-    return -0.5 * float(np.sum((reactions0 + reactions1) * shift))
-
-
 def energy_tolerance(scene: Scene, control: StepControl) -> float:
     """Largest energy gain a step may make: control.energy_growth times sum m g d (the work of
     lifting every grain by its own size); 0 turns the check off."""
@@ -520,7 +508,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
                 # a moving wall (the lid) works on the grains: the energy may grow by that work and
                 # no more (the 515-grain lid jam, unchecked, gained 1e-5-5e-4 J per step against
                 # the lid's 1e-7 J: docs/dynamics.md "Energy never grows")
-                gain = new_energy - energy - wall_work(scene, state.t, new.t, reactions, info.wall_reactions)
+                gain = new_energy - energy - scene.contact.wall_work(state.t, new.t, reactions, info.wall_reactions)
                 if gain > tolerance:
                     if h > 1e-3 * control.dt_max:
                         raise StepRejected(f"the total energy grew by {gain:.3g} J in one step (tolerance {tolerance:.3g} J)")
