@@ -3,7 +3,7 @@ contact/model.py: ContactModel.wall_work; docs/dynamics.md "Energy never grows")
 
 The implicit integrator's energy guard compared a step's total energy with the last one only while
 no wall moved, so a moving lid switched it off: in the 515-grain lid jam at the real density the
-energy then grew by 1e-5-5e-4 J per step against the lid's 1e-7 J, and the pack rattled at m/s.
+energy then grew by 1e-6-5e-4 J per step against the lid's 1e-7 J, and the pack rattled at m/s.
 The guard now subtracts the walls' work, measured by the trapezoidal rule of their reactions."""
 
 import numpy as np

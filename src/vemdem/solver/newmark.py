@@ -506,7 +506,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
             if tolerance > 0:
                 new_energy = total_energy(scene, new, info.strain_energy, info.contact_energy)
                 # a moving wall (the lid) works on the grains: the energy may grow by that work and
-                # no more (the 515-grain lid jam, unchecked, gained 1e-5-5e-4 J per step against
+                # no more (the 515-grain lid jam, unchecked, gained 1e-6-5e-4 J per step against
                 # the lid's 1e-7 J: docs/dynamics.md "Energy never grows")
                 gain = new_energy - energy - scene.contact.wall_work(state.t, new.t, reactions, info.wall_reactions)
                 if gain > tolerance:
