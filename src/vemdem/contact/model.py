@@ -364,13 +364,18 @@ class ContactModel:
         vel += [np.repeat(pl.motion.velocity(t)[None, :], 3, axis=0) for pl in self.planes]
         return np.vstack(vel) if vel else np.zeros((0, 3))
 
+    @property
+    def walls_move(self) -> bool:
+        """Whether any wall has a prescribed motion (a removal alone is not one)."""
+        return any(w.motion.moves for w in self.meshes + self.planes)
+
     def wall_work(self, t0: float, t1: float, reactions0: np.ndarray, reactions1: np.ndarray) -> float:
         """Work of the walls' prescribed motion on the grains from t0 to t1: minus the grains' force
         on each wall (the mean of its values at t0 and t1, the trapezoidal rule of a step) dotted
-        with the wall's displacement. 0 where no wall moves."""
-        walls = self.meshes + self.planes  # the order of ContactResult.wall_reactions
-        if not any(w.motion.moves for w in walls):
+        with the wall's displacement. 0 where no wall moves (the reactions may then be None)."""
+        if not self.walls_move:
             return 0.0
+        walls = self.meshes + self.planes  # the order of ContactResult.wall_reactions
         shift = np.array([w.motion.displacement(t1) - w.motion.displacement(t0) for w in walls]).reshape(-1, 3)
         return -0.5 * float(np.sum((reactions0 + reactions1) * shift))
 

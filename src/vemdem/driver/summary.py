@@ -16,8 +16,9 @@ def energy_balance(history_csv, since: float | None = None) -> dict | None:
     energy gravity released, the work the moving walls did on the grains (W), and the balance
     error (E_end + dissipated - E_start - W) relative to the largest of the released potential,
     the initial kinetic energy and |W| (issue 17: within 1 % when the integrator keeps the books;
-    a removed wall takes its contact energy with it). `since`: from the first frame at or after that time (a scenario that works on the
-    grains until then, as the tilting box turning gravity). None when there are fewer than two frames."""
+    a removed wall takes its contact energy with it). `since`: from the first frame at or after
+    that time (a scenario that works on the grains until then, as the tilting box turning
+    gravity). None when there are fewer than two frames."""
     try:
         with open(history_csv) as fh:
             rows = list(csv.DictReader(fh))
@@ -72,7 +73,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,
-        "energy": _books(scene, run),
+        "energy": _books(run),
         "contact": {
             "activation_gap": scene.contact.law.activation_gap,
             "penalty": scene.contact.law.penalty,
@@ -97,5 +98,5 @@ def _linear(integrator) -> dict | None:
             "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
 
 
-def _books(scene: Scene, run: Run) -> dict | None:
+def _books(run: Run) -> dict | None:
     return energy_balance(run.out_dir / "history.csv") if run.out_dir is not None else None
