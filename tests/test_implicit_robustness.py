@@ -61,8 +61,8 @@ def test_twelve_grain_drop_finishes_at_the_real_density():
     assert stats.newton_iterations / stats.accepted < 10
 
 
-@pytest.mark.parametrize("predictor", ["rest", "rigid"])
-def test_lid_moving_past_its_gap_in_one_step_carries_the_grain(predictor):
+@pytest.mark.parametrize("predictor,line_search", [("rest", False), ("rigid", False), ("rest", True)])
+def test_lid_moving_past_its_gap_in_one_step_carries_the_grain(predictor, line_search):
     """A lid that moves further in one step than its gap to a grain (a lid pressing a pack at a
     large step) used to start Newton with the lid behind the grain's surface, and the step was
     rejected until the lid's travel per step fell below its gap. The walls now start where they
@@ -70,7 +70,9 @@ def test_lid_moving_past_its_gap_in_one_step_carries_the_grain(predictor):
     grain ends in front of the lid and has been pushed at least as far as the lid went past the
     initial gap (checked against the lid's position, computed independently of the solver). The
     optional rigid predictor is bounded against the lid where it stands at the step's start (it
-    used to be bounded against the lid at the step's end, already past the grain, and crashed)."""
+    used to be bounded against the lid at the step's end, already past the grain, and crashed).
+    The optional line search on the incremental potential (off by default) ends at the same state
+    as plain Newton: it shortens updates, it does not move the solution."""
     from vemdem.contact.walls import Motion, PlaneWall
     from vemdem.geometry.shapes import cube
     from vemdem.solver.newmark import NewmarkParameters, initial_state, newmark_step
@@ -85,7 +87,10 @@ def test_lid_moving_past_its_gap_in_one_step_carries_the_grain(predictor):
     scene = Scene.build([grain], material, law, friction, planes=[lid], gravity=(0, 0, 0))
     dt = 4 * gap / speed  # the lid passes four gaps into where the grain stands
     state = initial_state(scene)
-    new, _ = newmark_step(scene, state, dt, NewmarkParameters(predictor=predictor))
+    new, _ = newmark_step(scene, state, dt, NewmarkParameters(predictor=predictor, line_search=line_search))
+    if line_search:
+        plain, _ = newmark_step(scene, state, dt, NewmarkParameters(predictor=predictor))
+        assert np.abs(new.x - plain.x).max() < 1e-9 * size
     lid_z = top + gap - speed * dt
     assert new.x[:, 2].max() < lid_z  # in front of the lid: pushed by at least its overshoot
     assert np.ptp(new.x[:, 2] - state.x[:, 2]) < 1e-3 * (top - lid_z)  # moved as a body, not crushed

@@ -355,7 +355,9 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
                 and r_norm > 0.5 * corrections[-2][1]):  # fmt: skip
             alpha = params.stall_share
         corrections.append((dx_norm, r_norm))
-        if params.line_search and dx_norm > 1e3 * params.xtol * max(np.abs(du).max(), 1e-6 * size):
+        # only while the update is far above what the convergence test asks (1e3 dx_tol): near
+        # convergence the merit's round-off would stall it
+        if params.line_search and dx_norm > 1e3 * dx_tol:
             merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates, frozen)
             alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = path.at(alpha)
