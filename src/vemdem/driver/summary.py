@@ -68,7 +68,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
         "newton_iterations_per_simulated_second": stats.newton_iterations / state.t if state.t > 0 else 0.0,
         "linear_solver": _linear(run.integrator),
-        "n_energy_gain_steps": stats.energy_gains,  # implicit: tiny steps accepted although the energy grew
+        "n_energy_gain_steps": stats.energy_gains,  # implicit: steps accepted although the energy grew
         "n_frozen_pair_steps": stats.frozen_pair_steps,  # implicit: steps converged with cycling pairs kept
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),

@@ -80,7 +80,7 @@ class RunStats:
     newton_iterations: int = 0
     krylov_iterations: int = 0
     last_rejection: str = ""
-    energy_gains: int = 0  # implicit: steps accepted below 1e-3 dt_max although the energy grew
+    energy_gains: int = 0  # implicit: steps accepted although the energy grew (below 1e-3 dt_max, or not shrunk by halving)
     frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs kept (freeze_cycles)
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
