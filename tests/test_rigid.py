@@ -152,7 +152,7 @@ def test_a_cube_above_its_friction_angle_slides_at_coulombs_acceleration(integra
     assert measured == pytest.approx(expected, rel=0.03)
 
 
-def head_on(grain_model: str, integrator_name: str = "implicit", dt_max: float = 1e-4, freeze_cycles: bool = False):
+def head_on(grain_model: str, integrator_name: str = "implicit", dt_max: float = 1e-4, freeze_cycles: bool = True):
     """Two cubes face to face, closing at 0.2 m/s, no gravity, light damping; centroid
     velocities after the impact. The flexible pair runs implicitly with the contact-impact step
     control (60 steps per contact half-period)."""
@@ -183,11 +183,14 @@ def test_head_on_collision_matches_the_flexible_grains(integrator, dt_max, rel):
     assert rigid.sum() == pytest.approx(0.0, abs=1e-9)  # momentum
 
 
-def test_frozen_cycling_pairs_leave_the_head_on_rebound_unchanged():
-    """`[solver] freeze_cycles` keeps a pair that cycles in and out of Newton's set; where its contact
-    was handed over to another record it must not count twice (contact.model._handed_over): without
-    that rule this rebound was 0.24 % faster (0.038360 against 0.038268 m/s; rigid 0.038270)."""
-    assert head_on("flexible", freeze_cycles=True) == pytest.approx(head_on("flexible"), rel=1e-6)
+def test_frozen_cycling_pairs_barely_move_the_head_on_rebound():
+    """`[solver] freeze_cycles` (the default) keeps a pair that cycles in and out of Newton's set, and
+    holds out a found one that twins a steady record (the same touching spot). Measured rebound:
+    0.038245 m/s with frozen pairs, 0.038268 without, 0.038270 with rigid grains. Counting the twins
+    twice (session 14) made it 0.24 % faster (0.038360): this test fails on that rule."""
+    frozen, free = head_on("flexible"), head_on("flexible", freeze_cycles=False)
+    assert frozen == pytest.approx(free, rel=1e-3)
+    assert frozen.sum() == pytest.approx(0.0, abs=1e-9)  # momentum
 
 
 def test_rigid_grains_take_either_integrator():

@@ -440,9 +440,18 @@ TWIN_FRACTION = 0.5
 
 def _with_frozen(x_all, ints, floats, frozen: FrozenPairs | None, gbar: float):
     """The narrow phase's records plus the frozen ones it did not find and that twin no found record
-    (the same touching spot: its force is carried, adding it would count it twice)."""
+    (the same touching spot: its force is carried, adding it would count it twice), less the frozen
+    ones it found that twin a record outside the frozen set: a twin that comes and goes (an
+    edge-edge record at its edge's end beside the end vertex's vertex-face record) is held out for
+    the rest of the step, so that the set Newton iterates on stays the same."""
     if frozen is None or not len(frozen.keys):
         return x_all, ints, floats
+    found = np.isin(pair_keys(ints), frozen.keys)
+    if found.any() and not found.all():
+        held_out = np.zeros(len(ints), dtype=bool)
+        held_out[found] = _twinned(x_all, ints[found], floats[found], ints[~found], floats[~found], TWIN_FRACTION * gbar)
+        if held_out.any():
+            ints, floats = ints[~held_out], floats[~held_out]
     missing = ~np.isin(frozen.keys, pair_keys(ints))
     if missing.any():
         missing[missing] = ~_twinned(x_all, frozen.ints[missing], frozen.floats[missing], ints, floats,

@@ -37,7 +37,7 @@ class SolverOptions:
     max_iterations: int = 15
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
     grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
-    freeze_cycles: bool = False  # implicit flexible: keep pairs that cycle in and out of Newton's set
+    freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
