@@ -242,8 +242,7 @@ def _unculled(x, A, B, gbar, vptr, fptr, eptr, t):
         for p in range(vptr[ga], vptr[ga + 1]):
             for e in range(eptr[gb], eptr[gb + 1]):
                 d = _ve_gap(x, p, e, t.edges, gbar)[0]
-                if d >= 0.0 and _vertex_edge_survives(x, p, e, t.faces, t.edges, t.edge_faces, t.edge_type,
-                                                      t.vertex_edge_ptr, t.vertex_edges, gbar):  # fmt: skip
+                if d >= 0.0 and _vertex_edge_survives(x, p, e, t.faces, t.edge_faces, t.edge_type, gbar):
                     out.append((VERTEX_EDGE, ga, gb, p, e, d))
     for p in range(vptr[A], vptr[A + 1]):
         for q in range(vptr[B], vptr[B + 1]):

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
+from .fade import fade_conservative, fade_conservative_tangent, is_faded
 from .law import normal_force, normal_potential
 from .narrow import EDGE_EDGE, N_NODES, gap_derivatives, gap_gradient, pair_weights
 from .pairs import C0, C1, KIND, NODE0
@@ -54,6 +55,8 @@ def _local_forces(x, ints, floats, law, energy, local_force):
         grad = np.zeros((6, 3))
         d = gap_gradient(kind, xs, floats[c, C0], floats[c, C1], grad)
         _normal_terms(c, nn, d, grad, law, energy, local_force)
+        if is_faded(kind, xs, law):
+            fade_conservative(xs, law, c, energy, local_force)
 
 
 @njit(parallel=True, cache=True)
@@ -72,6 +75,8 @@ def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
             gr = grad[r // 3, r % 3]
             for s in range(3 * nn):
                 local_tangent[c, r, s] = k * gr * grad[s // 3, s % 3] - fn * hess[r, s]
+        if is_faded(kind, xs, law):
+            fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent)
 
 
 @njit(cache=True)

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from .fade import fade_dissipative, is_faded
 from .law import normal_force, normal_stiffness_slope
 from .narrow import (
     EDGE_EDGE,
@@ -214,8 +215,10 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
                        stick_out, gt_out):  # fmt: skip
     """Damping + friction residual of every pair (no tangent)."""
     for c in prange(len(ints)):  # np.int64: c is uint64 in the parallel body, a second compilation of _pair_force
-        _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
-                    stick_out, gt_out)  # fmt: skip
+        xs, _ = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
+                            local_force, stick_out, gt_out)  # fmt: skip
+        if is_faded(ints[c, KIND], xs, law):
+            fade_dissipative(xs, law, np.int64(c), local_force, xs, local_force, False)  # typed stand-ins
 
 
 @njit(parallel=True, cache=True)
@@ -226,8 +229,15 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
     for c in prange(len(ints)):
         xs, vs = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
                              local_force, stick_out, gt_out)  # fmt: skip
-        dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
-                            fr[c], m_eq[c], local_tangent[c])  # fmt: skip
+        kind = ints[c, KIND]
+        if is_faded(kind, xs, law):  # the edge-edge fade weighs this residual and its Jacobian
+            own = np.zeros((18, 18))
+            dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
+                                m_eq[c], own)  # fmt: skip
+            fade_dissipative(xs, law, np.int64(c), local_force, own, local_tangent, True)
+        else:
+            dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
+                                m_eq[c], local_tangent[c])  # fmt: skip
 
 
 @njit(cache=True)

@@ -9,8 +9,8 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   by the vertex-face pairs of the planar region
     vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
                   eligible vertex-face pair with either face at the edge, a concave edge only to
-                  both; and to two or more eligible edge-edge pairs between the edge and edges at
-                  the vertex
+                  both (edge-edge pairs at the vertex do not remove it: they fade out near their
+                  edges' ends, fade.py, and the vertex-edge pair carries the spot there)
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 
@@ -131,7 +131,7 @@ def _ee_gap(x, ea, eb, edges, edge_type, gbar):
 
 
 @njit(cache=True)
-def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar):
+def _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
     fa = edge_faces[e, 0]
     fb = edge_faces[e, 1]
     ca = _vf_gap(x, p, fa, faces, gbar)[0] >= 0.0
@@ -141,11 +141,7 @@ def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_p
             return False
     elif ca or cb:
         return False
-    linked = 0
-    for k in range(v_edge_ptr[p], v_edge_ptr[p + 1]):
-        if _ee_gap(x, v_edges[k], e, edges, edge_type, gbar)[0] >= 0.0:
-            linked += 1
-    return linked < 2
+    return True
 
 
 @njit(cache=True)
@@ -358,9 +354,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
                 if not _point_near_box(x, p, ebox, e, gbar):
                     continue
                 d, t = _ve_gap(x, p, e, edges, gbar)
-                if d >= 0.0 and _vertex_edge_survives(
-                    x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar
-                ):
+                if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
                     n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
                                 np.int64(-1), t, 0.0, d)  # fmt: skip
     for p in vA:
