@@ -188,3 +188,17 @@ def test_the_config_key_reaches_newton():
     cfg, _ = checked_config(cfg)
     options = solver_options_from(cfg)
     assert (options.freeze_cycles, options.max_iterations, options.easy_iterations) == (False, 40, 20)
+
+
+def test_the_solver_defaults_are_one_set():
+    """`[solver]`'s defaults live in the config table (what users see in `vemdem example` and the
+    docs) and in SolverOptions (what the library's callers get): they must not drift apart."""
+    import dataclasses
+
+    from vemdem.config.tables import SOLVER
+    from vemdem.solver.api import SolverOptions
+
+    defaults = {f.name: f.default for f in dataclasses.fields(SolverOptions)}
+    assert set(defaults) <= set(SOLVER)
+    for key, value in defaults.items():
+        assert SOLVER[key].default == value, key
