@@ -1,6 +1,6 @@
-"""The edge-edge fade (contact/fade.py): edge-edge records weighed out near their edges' ends, so
-that the contact potential is continuous where an edge-edge record hands its spot to the end
-vertex's records (docs/contact.md, "twins")."""
+"""The edge-edge fade (contact/fade.py, `[contact] edge_fade`): edge-edge records weighed out near
+their edges' ends, so that the contact potential is continuous where an edge-edge record hands its
+spot to the end vertex's records (docs/contact.md, "twins")."""
 
 import numpy as np
 import pytest
@@ -14,7 +14,7 @@ from vemdem.contact.pairs import KIND
 from vemdem.geometry import cube
 
 GBAR = 2e-5
-LAW = InterfaceLaw(activation_gap=GBAR, penalty=1e9)
+LAW = InterfaceLaw(activation_gap=GBAR, penalty=1e9, edge_fade=True)
 FRICTIONLESS = FrictionLaw()
 FRICTION = FrictionLaw(mu_s=0.5, mu_d=0.4, tangential_penalty=1e6, tangential_viscosity=3.0, damping_ratio=0.4)
 
@@ -190,3 +190,23 @@ def test_a_vertex_over_an_edge_keeps_its_vertex_edge_record_beside_fading_edge_e
     phi_ve = float(LAW.packed()[2] * (GBAR - d_ve) ** 3 / 3)  # the penalty branch's potential
     assert res.energy >= phi_ve
     assert res.energy < 1.5 * phi_ve  # the faded edge-edge records add little
+
+
+def test_the_fade_is_off_by_default_and_the_config_key_turns_it_on():
+    import tomllib
+
+    from vemdem.contact.defaults import default_contact_laws
+    from vemdem.scenarios.registry import checked_config, example_text
+
+    assert InterfaceLaw(GBAR, 1e9).edge_fade is False
+    assert default_contact_laws(1e-3, 90e9, 2200.0)[0].edge_fade is False
+    assert default_contact_laws(1e-3, 90e9, 2200.0, edge_fade=True)[0].edge_fade is True
+    cfg = tomllib.loads(example_text("drop"))
+    assert checked_config(dict(cfg))[0]["contact"]["edge_fade"] is False
+    cfg.setdefault("contact", {})["edge_fade"] = True
+    assert checked_config(cfg)[0]["contact"]["edge_fade"] is True
+    model, x = wedge_over_edge(0.5e-3 - 0.4 * GBAR)
+    faded = model.evaluate(x, 0.0, model.search(x, 0.0))
+    model.law_params = InterfaceLaw(GBAR, 1e9).packed()  # the same scene without the fade
+    unweighted = model.evaluate(x, 0.0, model.search(x, 0.0))
+    assert unweighted.energy > 1.05 * faded.energy

@@ -117,6 +117,10 @@ CONTACT = {
     "tangential_penalty": Field(float, None, positive, "N/m [the normal stiffness at the switch gap]"),
     "tangential_viscosity": Field(float, None, non_negative, "N s/m [0]"),
     "damping_ratio": Field(float, None, non_negative, "normal damping ratio [0.5]"),
+    "edge_fade": Field(bool, False,
+                       doc="weigh edge-edge records out within the activation gap of their edges' ends, so the contact "
+                           "potential is continuous there (docs/contact.md: no energy jumps, but Newton is slower in "
+                           "jammed packs)"),
 }
 
 SOLVER = {

@@ -1,4 +1,6 @@
-"""The edge-edge fade: edge-edge records weighed out near their edges' ends (docs/contact.md, "twins").
+"""The edge-edge fade (`[contact] edge_fade`, off by default): edge-edge records weighed out near
+their edges' ends (docs/contact.md, "twins", where the measurements say why it is off: it slows
+Newton in jammed packs).
 
 Near an edge's end an edge-edge record and its end vertex's records (vertex-face, vertex-edge)
 carry the same touching spot, and the edge-edge record leaves when its closest point passes the
@@ -9,7 +11,7 @@ record (normal law, damping and friction together) is therefore multiplied by
 
 with L the edge lengths, s, t the closest points' coordinates and psi(l) the C2 smooth step
 10 u^3 - 15 u^4 + 6 u^5 of u = l / r, 1 for l >= r. l is the distance of a closest point from an
-edge end; the radius r is the activation gap gbar. w is 1 wherever both closest points lie at
+edge end; the radius r is the activation gap gbar (law[FADE]; 0 turns the fade off). w is 1 wherever both closest points lie at
 least r from the ends, and falls to 0 at an end, where the vertex records take over: the pair's
 potential w Phi(d) is continuous. Its derivatives:
 
@@ -27,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .law import GBAR
+from .law import FADE
 from .narrow import EDGE_EDGE
 
 COMPLEX_STEP = 1e-30
@@ -140,7 +142,7 @@ def fade_hessian(xs, r, hess):
 def is_faded(kind, xs, law):
     """Whether the pair (kind, node positions xs) is an edge-edge record inside the fade zone: the
     few records the fade touches."""
-    return kind == EDGE_EDGE and in_fade_zone(xs, law[GBAR])
+    return law[FADE] > 0.0 and kind == EDGE_EDGE and in_fade_zone(xs, law[FADE])
 
 
 @njit(cache=True)
@@ -159,7 +161,7 @@ def real_fade_gradient(xs, r):
 @njit(cache=True)
 def fade_conservative(xs, law, c, energy, local_force):
     """Weigh pair c's potential Phi and its gradient by w (module docstring); returns (w, dw/dx, Phi)."""
-    w, gw = real_fade_gradient(xs, law[GBAR])
+    w, gw = real_fade_gradient(xs, law[FADE])
     phi = energy[c]
     energy[c] = w * phi
     for i in range(4):
@@ -173,7 +175,7 @@ def fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent):
     """fade_conservative, and the pair's Hessian weighed too (a kernel of its own: explicit runs never
     compile the complex-step Hessian)."""
     hw = np.zeros((12, 12))
-    fade_hessian(xs, law[GBAR], hw)
+    fade_hessian(xs, law[FADE], hw)
     f = np.empty(12)  # dPhi/dx before weighing
     for i in range(12):
         f[i] = local_force[c, i // 3, i % 3]
@@ -188,7 +190,7 @@ def fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent):
 def fade_dissipative(xs, law, c, local_force, pair_tangent, local_tangent, tangent):
     """Weigh pair c's damping and friction residual by w; with tangent, pair_tangent (18, 18), that
     residual's own Jacobian, is added to local_tangent[c] as w dF/dx + F dw/dx^T."""
-    w, gw = real_fade_gradient(xs, law[GBAR])
+    w, gw = real_fade_gradient(xs, law[FADE])
     if tangent:
         for i in range(12):
             fi = local_force[c, i // 3, i % 3]

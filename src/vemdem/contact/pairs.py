@@ -9,8 +9,9 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   by the vertex-face pairs of the planar region
     vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
                   eligible vertex-face pair with either face at the edge, a concave edge only to
-                  both (edge-edge pairs at the vertex do not remove it: they fade out near their
-                  edges' ends, fade.py, and the vertex-edge pair carries the spot there)
+                  both (edge-edge pairs at the vertex no longer remove it: that rule switched
+                  the record on inside the layer as they left, and with the edge-edge fade,
+                  fade.py, it would leave the spot unsupported)
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 

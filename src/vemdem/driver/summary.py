@@ -80,6 +80,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
             "reference_force": scene.contact.law.switch_force,
             "tangential_penalty": scene.contact.friction.tangential_penalty,
             "damping_ratio": scene.contact.friction.damping_ratio,
+            "edge_fade": scene.contact.law.edge_fade,
         },
     }
 
