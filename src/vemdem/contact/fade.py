@@ -11,9 +11,9 @@ record (normal law, damping and friction together) is therefore multiplied by
 
 with L the edge lengths, s, t the closest points' coordinates and psi(l) the C2 smooth step
 10 u^3 - 15 u^4 + 6 u^5 of u = l / r, 1 for l >= r. l is the distance of a closest point from an
-edge end; the radius r is the activation gap gbar (law[FADE]; 0 turns the fade off). w is 1 wherever both closest points lie at
-least r from the ends, and falls to 0 at an end, where the vertex records take over: the pair's
-potential w Phi(d) is continuous. Its derivatives:
+edge end; the radius r is the activation gap gbar (law[FADE]; 0 turns the fade off). w is 1
+wherever both closest points lie at least r from the ends, and falls to 0 at an end, where the
+vertex records take over: the pair's potential w Phi(d) is continuous. Its derivatives:
 
     d(w Phi)/dx   = w dPhi/dx + Phi dw/dx
     d2(w Phi)/dx2 = w d2Phi/dx2 + dPhi/dx dw/dx^T + dw/dx dPhi/dx^T + Phi d2w/dx2
