@@ -9,8 +9,8 @@ from vemdem.contact.fade import fade_hessian, in_fade_zone, real_fade_gradient, 
 from vemdem.contact.friction import FrictionLaw
 from vemdem.contact.law import InterfaceLaw
 from vemdem.contact.model import ContactModel
-from vemdem.contact.narrow import EDGE_EDGE, VERTEX_EDGE, VERTEX_FACE
-from vemdem.contact.pairs import KIND
+from vemdem.contact.narrow import EDGE_EDGE, VERTEX_EDGE, VERTEX_FACE, edge_edge_lcp
+from vemdem.contact.pairs import KIND, NODE0
 from vemdem.geometry import cube
 
 GBAR = 2e-5
@@ -25,17 +25,9 @@ def edge_pairs_in_zone(rng, n, r):
     out = []
     while len(out) < n:
         xs = rng.normal(size=(4, 3))
-        if in_fade_zone(xs, r) and _coords_in_range(xs):
+        if in_fade_zone(xs, r) and edge_edge_lcp(*xs)[0]:
             out.append(xs)
     return out
-
-
-def _coords_in_range(xs):
-    da, db, r = xs[1] - xs[0], xs[3] - xs[2], xs[0] - xs[2]
-    aa, bb, ab, ra, rb = da @ da, db @ db, da @ db, r @ da, r @ db
-    det = aa * bb - ab * ab
-    s, t = (ab * rb - bb * ra) / det, (aa * rb - ab * ra) / det
-    return 0 < s < 1 and 0 < t < 1
 
 
 def test_the_smooth_step_rises_from_0_to_1_with_continuous_slope_and_curvature():
@@ -147,7 +139,7 @@ def test_a_faded_record_has_the_derivatives_of_its_weighted_potential(friction, 
     assert len(ee) == 1
     nodes = np.zeros((4, 3))
     for i in range(4):
-        nodes[i] = x[res.ints[ee[0], 5 + i]]
+        nodes[i] = x[res.ints[ee[0], NODE0 + i]]
     assert in_fade_zone(nodes, GBAR)
     w = real_fade_gradient(nodes, GBAR)[0]
     assert 0.05 < w < 0.95

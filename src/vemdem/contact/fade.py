@@ -187,15 +187,23 @@ def fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent):
 
 
 @njit(cache=True)
-def fade_dissipative(xs, law, c, local_force, pair_tangent, local_tangent, tangent):
-    """Weigh pair c's damping and friction residual by w; with tangent, pair_tangent (18, 18), that
-    residual's own Jacobian, is added to local_tangent[c] as w dF/dx + F dw/dx^T."""
+def fade_dissipative(xs, law, c, local_force):
+    """Weigh pair c's damping and friction residual F by w; returns (w, dw/dx)."""
     w, gw = real_fade_gradient(xs, law[FADE])
-    if tangent:
-        for i in range(12):
-            fi = local_force[c, i // 3, i % 3]
-            for j in range(12):
-                local_tangent[c, i, j] += w * pair_tangent[i, j] + fi * gw[j // 3, j % 3]
     for i in range(4):
         for a in range(3):
             local_force[c, i, a] *= w
+    return w, gw
+
+
+@njit(cache=True)
+def fade_dissipative_tangent(xs, law, c, local_force, pair_tangent, local_tangent):
+    """fade_dissipative, and pair_tangent (18, 18), that residual's own Jacobian, added to
+    local_tangent[c] as w dF/dx + F dw/dx^T."""
+    f = np.empty(12)  # F before weighing
+    for i in range(12):
+        f[i] = local_force[c, i // 3, i % 3]
+    w, gw = fade_dissipative(xs, law, c, local_force)
+    for i in range(12):
+        for j in range(12):
+            local_tangent[c, i, j] += w * pair_tangent[i, j] + f[i] * gw[j // 3, j % 3]

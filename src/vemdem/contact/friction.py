@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from .fade import fade_dissipative, is_faded
+from .fade import fade_dissipative, fade_dissipative_tangent, is_faded
 from .law import normal_force, normal_stiffness_slope
 from .narrow import (
     EDGE_EDGE,
@@ -218,7 +218,7 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
         xs, _ = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
                             local_force, stick_out, gt_out)  # fmt: skip
         if is_faded(ints[c, KIND], xs, law):
-            fade_dissipative(xs, law, np.int64(c), local_force, xs, local_force, False)  # typed stand-ins
+            fade_dissipative(xs, law, np.int64(c), local_force)
 
 
 @njit(parallel=True, cache=True)
@@ -234,7 +234,7 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
             own = np.zeros((18, 18))
             dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
                                 m_eq[c], own)  # fmt: skip
-            fade_dissipative(xs, law, np.int64(c), local_force, own, local_tangent, True)
+            fade_dissipative_tangent(xs, law, np.int64(c), local_force, own, local_tangent)
         else:
             dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
                                 m_eq[c], local_tangent[c])  # fmt: skip
