@@ -174,6 +174,14 @@ def test_lid_compression_cycle(tmp_path, settled):
     books = summary["energy"]
     assert books["wall_work"] == pytest.approx(summary["hysteresis_energy"], rel=0.2)
     assert abs(books["balance_error"]) < 0.01
+    # fluctuations.csv: one row per frame the lid moved, its strains those of force_strain.csv,
+    # its inertia numbers from the same lid forces (analysis.fluctuations)
+    fl = np.genfromtxt(tmp_path / "fluctuations.csv", delimiter=",", names=True)
+    assert len(fl) == len(strain) - 1  # the last frame: the lid at rest at the cycle's end
+    np.testing.assert_allclose(fl["strain"], strain[:-1], rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(np.isfinite(fl["inertia_number"]), force[:-1] > 0)
+    assert summary["fluctuations"]["inertia_number_min"] == fl["inertia_number"].min()
+    assert (tmp_path / "fluctuations.png").stat().st_size > 10_000
 
 
 def test_lid_above_the_pack_is_required(tmp_path, settled):

@@ -6,8 +6,10 @@ the floor (7 mm), moves down at `lid.speed` to `lid.end` (4.9 mm) and back up at
 strain = (lid.start - lid height) / lid.start, force = the vertical force of the grains on the
 lid (N, positive when pushed up). Outputs in DIR: force_strain.csv (header `phase,strain,force`,
 one row per frame; phase `load` or `unload`), force_strain.png, summary.json (peak_force,
-hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured) and
-the scene outputs (walls.csv has the lid's force at every frame; `--resume` continues a run).
+hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured),
+fluctuations.csv and fluctuations.png (the grains' non-affine velocities and the inertia number
+per frame: how quasi-static the cycle was, analysis.fluctuations) and the scene outputs
+(walls.csv has the lid's force at every frame; `--resume` continues a run).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.fluctuations import fluctuation_figures, lid_fluctuations, plot_fluctuations, write_fluctuations_csv
 from ..analysis.force_strain import cycle_figures, plot_force_strain, write_force_strain_csv
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
@@ -57,6 +60,17 @@ def lid_curve(walls_csv: Path, lid: PlaneWall, start: float, turn: float):
     return phase, (start - height) / start, np.array(force)
 
 
+def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict) -> dict:
+    """fluctuations.csv and .png: how far from quasi-static the cycle was (analysis.fluctuations)."""
+    area = float(meta["box"][0]) * float(meta["box"][1])
+    rows = lid_fluctuations(out_dir / "grains.csv", out_dir / "walls.csv", lid, start, meta["floor"], area,
+                            scene.grain_size, scene.material.density)  # fmt: skip
+    write_fluctuations_csv(out_dir / "fluctuations.csv", rows)
+    speed = abs(float(lid.motion.velocity(0.0)[2]))
+    plot_fluctuations(rows, out_dir / "fluctuations.png", f"{scene.n_grains} grains, lid speed {speed:.3g} m/s")
+    return fluctuation_figures(rows)
+
+
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -85,6 +99,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     plot_force_strain(phase, strain, force, out_dir / "force_strain.png", figures if "peak_force" in figures else None)
     summary = run_summary("lid_compression", scene, result, t_start)
     summary.update(figures)
+    summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
     summary["config_fingerprint"] = identity.fingerprint
