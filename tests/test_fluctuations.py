@@ -1,4 +1,5 @@
-"""analysis.fluctuations: the grains' velocities against the lid's affine field, and the inertia number."""
+"""analysis.fluctuations: the grains' velocity fluctuations (beyond the lid's affine field and each
+layer's mean flow) and the inertia number."""
 
 import csv
 import json
@@ -12,11 +13,11 @@ from vemdem.analysis.fluctuations import (
     RMS,
     STRAIN,
     W,
-    affine_fluctuations,
     fluctuation_figures,
     inertia_number,
     lid_fluctuations,
     plot_fluctuations,
+    velocity_fluctuations,
     write_fluctuations_csv,
 )
 from vemdem.scenarios.lid_compression import lid_wall
@@ -30,33 +31,55 @@ def _affine(z, height, w):
     return v
 
 
+def _layers(n_layers: int, per_layer: int) -> np.ndarray:
+    """Grain heights: n_layers layers one grain size thick from the floor, per_layer grains in each."""
+    rng = np.random.default_rng(5)
+    return FLOOR + D * (np.repeat(np.arange(n_layers), per_layer) + rng.uniform(0.01, 0.99, n_layers * per_layer))
+
+
 def test_a_pack_moving_with_the_affine_field_has_no_fluctuation():
-    z = np.linspace(FLOOR, 5e-3, 40)
+    z = _layers(6, 7)
     for w in (-0.02, 0.03):
-        assert affine_fluctuations(z, _affine(z, 6e-3, w), FLOOR, 6e-3, w, D) == (0.0, 0.0)
+        rms, median = velocity_fluctuations(z, _affine(z, 6e-3, w), FLOOR, 6e-3, w, D)
+        assert rms < 1e-12 and median < 1e-12
 
 
-def test_fluctuations_are_the_departures_from_the_affine_field_in_units_of_rate_d():
-    rng = np.random.default_rng(3)
-    z = rng.uniform(FLOOR, 5e-3, 200)
-    height, w = 6e-3, -0.02
-    extra = rng.normal(scale=0.01, size=(200, 3))
-    rms, median = affine_fluctuations(z, _affine(z, height, w) + extra, FLOOR, height, w, D)
+def test_a_mean_flow_of_each_layer_is_not_fluctuation():
+    # the top layers follow the lid while the bottom ones rest (a loose pack compacting from the
+    # top), with a sideways shear layer by layer: what is left is only the affine field's spread
+    # inside each layer, |z - <z>_layer| rate, far below the fluctuations of a jam (15-30 rate d)
+    z = _layers(5, 8)
+    v = np.zeros((len(z), 3))
+    v[z > FLOOR + 3 * D, 2] = -0.02
+    v[:, 0] = 0.003 * np.floor((z - FLOOR) / D)
+    rms, median = velocity_fluctuations(z, v, FLOOR, 6e-3, -0.02, D)
+    spread = np.concatenate([zl - zl.mean() for zl in np.split(z, 5)])  # _layers orders them by layer
+    assert rms == pytest.approx(np.sqrt(np.mean(spread**2)) / D, rel=1e-10)
+    assert median == pytest.approx(np.median(np.abs(spread)) / D, rel=1e-10)
+    assert rms < 0.3  # about d / sqrt(12) = 0.29 d for heights spread evenly through a layer
+
+
+def test_fluctuations_are_departures_from_the_layer_mean_in_units_of_rate_d():
+    # in every layer half the grains drift sideways at u and half do not: each departs from its
+    # layer's mean by u / 2, on top of any affine motion
+    z = _layers(5, 8)
+    height, w, u = 6e-3, -0.02, 0.01
+    v = _affine(z, height, w)
+    v[::2, 0] += u
     unit = 0.02 / (height - FLOOR) * D
-    speed = np.sqrt((extra**2).sum(axis=1))
-    assert rms == pytest.approx(np.sqrt(np.mean(speed**2)) / unit, rel=1e-12)
-    assert median == pytest.approx(np.median(speed) / unit, rel=1e-12)
-    # a rigid drift of every grain sideways by u is u / (rate d) of fluctuation
-    drift = _affine(z, height, w) + np.array([0.005, 0.0, 0.0])
-    assert affine_fluctuations(z, drift, FLOOR, height, w, D)[0] == pytest.approx(0.005 / unit, rel=1e-12)
+    rms, median = velocity_fluctuations(z, v, FLOOR, height, w, D)
+    assert rms == pytest.approx(0.5 * u / unit, rel=1e-12)
+    assert median == pytest.approx(0.5 * u / unit, rel=1e-12)
+    # a uniform drift of the whole pack is mean flow, not fluctuation
+    assert velocity_fluctuations(z, v + [0.0, 0.004, 0.0], FLOOR, height, w, D)[0] == pytest.approx(rms, rel=1e-12)
 
 
 def test_no_affine_field_without_a_moving_lid_above_the_floor():
     z = np.array([1e-3])
     with pytest.raises(ValueError, match="no affine field"):
-        affine_fluctuations(z, np.zeros((1, 3)), FLOOR, FLOOR, -0.02, D)
+        velocity_fluctuations(z, np.zeros((1, 3)), FLOOR, FLOOR, -0.02, D)
     with pytest.raises(ValueError, match="no affine field"):
-        affine_fluctuations(z, np.zeros((1, 3)), FLOOR, 5e-3, 0.0, D)
+        velocity_fluctuations(z, np.zeros((1, 3)), FLOOR, 5e-3, 0.0, D)
 
 
 def test_inertia_number():
@@ -88,9 +111,9 @@ def test_a_lid_run_frame_by_frame(tmp_path):
     lid, duration = lid_wall({"start": start, "end": end, "speed": speed}, (0.0, 0.0))
     times = np.linspace(0.0, duration, 11)  # the 6th frame is the turning point, the last the end
     forces = np.r_[0.0, 0.0, 0.5, 2.0, 4.0, 5.0, 3.0, 1.0, 0.2, 0.0, 0.0]
-    z = np.linspace(FLOOR, 4e-3, 30)
+    z = _layers(3, 10)
     extra = np.zeros((30, 3))
-    extra[::2, 0] = 0.01  # every other grain drifts sideways at 1 cm/s
+    extra[::2, 0] = 0.01  # in every layer, half the grains drift sideways at 1 cm/s
     _write_run(tmp_path, lid, start, times, forces, z, extra)
     rows = lid_fluctuations(tmp_path / "grains.csv", tmp_path / "walls.csv", lid, start, FLOOR, area, D, rho)
     assert rows.shape == (10, len(HEADER))  # the end of the cycle (lid at rest) is left out
@@ -99,7 +122,7 @@ def test_a_lid_run_frame_by_frame(tmp_path):
         rate = speed / (height - FLOOR)
         assert row[W] == pytest.approx(-speed if t < 0.5 * duration else speed)
         assert row[STRAIN] == pytest.approx((start - height) / start)
-        assert row[RMS] == pytest.approx(np.sqrt(0.5) * 0.01 / (rate * D), rel=1e-9)
+        assert row[RMS] == pytest.approx(0.5 * 0.01 / (rate * D), rel=1e-9)
         expected = rate * D / np.sqrt(f / area / rho) if f > 0 else np.inf
         assert row[INERTIA] == pytest.approx(expected, rel=1e-12)
     write_fluctuations_csv(tmp_path / "fluctuations.csv", rows)

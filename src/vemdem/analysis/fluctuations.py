@@ -1,14 +1,20 @@
-"""How quasi-static a lid cycle was: the grains' velocities against the lid's affine field, and
-the inertia number.
+"""How quasi-static a lid cycle was: the grains' velocity fluctuations and the inertia number.
 
 A pack squeezed uniformly between the floor (height z_f) and a lid at height h moving at w
 (m/s, negative while loading) would move with the affine velocity field
 
     v_aff(z) = w (z - z_f) / (h - z_f) e_z,       strain rate  rate = |w| / (h - z_f).
 
-Each grain's non-affine velocity is dv = v - v_aff(z) at its centroid. Per frame this module
-reports the rms and the median of |dv| in units of rate d (d: the mean grain size), and the
-inertia number (GDR MiDi, Eur. Phys. J. E 14, 341, 2004)
+A grain's velocity fluctuation is what is left of its centroid velocity once the affine field
+and the mean flow of its layer are taken out:
+
+    u = v - v_aff(z),     dv = u - <u>_layer,
+
+layers one grain size d thick from the floor. The layer mean removes a mean flow that is not
+affine (a loose pack compacts under the lid first, its bottom at rest), which the affine field
+alone would count as fluctuation (2-3 rate d before the lid touches). Per frame this module
+reports the rms and the median of |dv| in units of rate d (d: the mean equivalent diameter),
+and the inertia number (GDR MiDi, Eur. Phys. J. E 14, 341, 2004)
 
     I = rate d / sqrt(P / rho),       P = lid force / box area,
 
@@ -18,8 +24,8 @@ the dense-flow one. rho is the density the inertia sees (the material's times th
 
 Why it matters here (docs/results.md, "The jam is the grains' own motion"): at the real density
 the 515-grain lid cycle enters the quasi-static regime when the pack jams, and there the grains'
-non-affine velocities grow to 10-20 times rate d; an integrator must follow them, on contacts
-whose gaps are nanometres, whatever its stability.
+fluctuations grow to 15-30 times rate d; an integrator must follow them, on contacts whose gaps
+are nanometres, whatever its stability.
 """
 
 from __future__ import annotations
@@ -36,15 +42,20 @@ T, W, STRAIN, FORCE, INERTIA, RMS, MEDIAN = range(len(HEADER))
 QUASI_STATIC = 1e-3  # GDR MiDi's bound of the quasi-static regime
 
 
-def affine_fluctuations(z: np.ndarray, v: np.ndarray, floor: float, height: float, lid_speed: float,
-                        grain_size: float) -> tuple[float, float]:
-    """(rms, median) of |v - v_aff| over the grains, in units of rate d; lid_speed is the lid's
-    vertical velocity (negative while it moves down)."""  # fmt: skip
+def velocity_fluctuations(z: np.ndarray, v: np.ndarray, floor: float, height: float, lid_speed: float,
+                          grain_size: float) -> tuple[float, float]:
+    """(rms, median) over the grains of |dv| (module docstring), in units of rate d; lid_speed
+    is the lid's vertical velocity (negative while it moves down)."""  # fmt: skip
     gap = height - floor
     if gap <= 0 or lid_speed == 0:
         raise ValueError(f"no affine field: lid {height:g} m over floor {floor:g} m moving at {lid_speed:g} m/s")
+    z = np.asarray(z, dtype=float)
     dv = np.array(v, dtype=float, copy=True)
-    dv[:, 2] -= lid_speed * (np.asarray(z) - floor) / gap
+    dv[:, 2] -= lid_speed * (z - floor) / gap
+    layer = np.floor((z - floor) / grain_size).astype(np.int64)
+    _, member, count = np.unique(layer, return_inverse=True, return_counts=True)
+    for k in range(3):
+        dv[:, k] -= (np.bincount(member, weights=dv[:, k]) / count)[member]
     speed = np.linalg.norm(dv, axis=1)
     unit = abs(lid_speed) / gap * grain_size
     return float(np.sqrt(np.mean(speed**2)) / unit), float(np.median(speed) / unit)
@@ -74,7 +85,7 @@ def lid_fluctuations(grains_csv: Path, walls_csv: Path, lid, start: float, floor
         g = table[table["time"] == t]
         height = start + float(lid.motion.displacement(t)[2])
         v = np.column_stack([g["vx"], g["vy"], g["vz"]])
-        rms, median = affine_fluctuations(g["z"], v, floor, height, w, grain_size)
+        rms, median = velocity_fluctuations(g["z"], v, floor, height, w, grain_size)
         f = force.get(float(t), 0.0)
         rate = abs(w) / (height - floor)
         inertia = inertia_number(rate, grain_size, f / area, density)
@@ -107,7 +118,7 @@ def fluctuation_figures(rows: np.ndarray) -> dict:
 
 
 def plot_fluctuations(rows: np.ndarray, path: Path, title: str = "") -> None:
-    """Non-affine velocity against strain and against the inertia number (log scales)."""
+    """Velocity fluctuations against strain and against the inertia number (log scales)."""
     from .plots import plt  # the package's Agg backend
 
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
@@ -116,13 +127,13 @@ def plot_fluctuations(rows: np.ndarray, path: Path, title: str = "") -> None:
     ax[0].semilogy(rows[load, STRAIN], rows[load, RMS], "o-", ms=3, label="rms")
     ax[0].semilogy(rows[load, STRAIN], rows[load, MEDIAN], "s-", ms=3, label="median")
     ax[0].set_xlabel("lid strain (loading)")
-    ax[0].set_ylabel(r"non-affine grain velocity / ($\dot\varepsilon\, d$)")
+    ax[0].set_ylabel(r"grain velocity fluctuation / ($\dot\varepsilon\, d$)")
     ax[0].legend()
     ax[0].grid(alpha=0.3, which="both")
     ax[1].loglog(rows[pressed, INERTIA], rows[pressed, RMS], "o", ms=3)
     ax[1].axvline(QUASI_STATIC, color="grey", ls="--")
     ax[1].set_xlabel(r"inertia number $I = \dot\varepsilon\, d / \sqrt{P/\rho}$ (left of the line: quasi-static)")
-    ax[1].set_ylabel("rms non-affine velocity / (rate d)")
+    ax[1].set_ylabel(r"rms velocity fluctuation / ($\dot\varepsilon\, d$)")
     ax[1].grid(alpha=0.3, which="both")
     if title:
         fig.suptitle(title)

@@ -7,7 +7,7 @@ strain = (lid.start - lid height) / lid.start, force = the vertical force of the
 lid (N, positive when pushed up). Outputs in DIR: force_strain.csv (header `phase,strain,force`,
 one row per frame; phase `load` or `unload`), force_strain.png, summary.json (peak_force,
 hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured),
-fluctuations.csv and fluctuations.png (the grains' non-affine velocities and the inertia number
+fluctuations.csv and fluctuations.png (the grains' velocity fluctuations and the inertia number
 per frame: how quasi-static the cycle was, analysis.fluctuations) and the scene outputs
 (walls.csv has the lid's force at every frame; `--resume` continues a run).
 """
