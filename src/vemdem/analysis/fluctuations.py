@@ -71,7 +71,7 @@ def lid_fluctuations(grains_csv: Path, walls_csv: Path, lid, start: float, floor
     """One row per frame (columns of HEADER) of a lid run's grains.csv and walls.csv; `lid` is the
     scenario's PlaneWall (its motion gives the lid's height and velocity), `start` its height at
     t = 0. Frames at which the lid is at rest (its turning point) are left out."""  # fmt: skip
-    table = np.genfromtxt(grains_csv, delimiter=",", names=True)
+    table = np.atleast_1d(np.genfromtxt(grains_csv, delimiter=",", names=True))  # one row reads as 0-d
     force = {}
     with Path(walls_csv).open() as fh:
         for row in csv.DictReader(fh):
