@@ -3,6 +3,7 @@ layer's mean flow) and the inertia number."""
 
 import csv
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -146,3 +147,13 @@ def test_a_lid_that_never_pressed_gives_null_with_a_reason():
     json.dumps(figures, allow_nan=False)
     quasi = fluctuation_figures(np.array([[0.0, -0.02, 0.0, 1.0, 0.1, 2.0, 1.0]]))
     assert quasi["rms_fluctuation_quasi_static_median"] is None and "no frame below" in quasi["reason"]
+
+
+@pytest.mark.parametrize("pressed", [0, 1])
+def test_the_figure_of_a_lid_that_barely_or_never_pressed_is_drawn_without_warnings(tmp_path, pressed):
+    rows = np.array([[0.0, -0.02, 0.0, 0.0, np.inf, 1.0, 0.5], [0.01, -0.02, 0.03, 0.0, np.inf, 0.0, 0.0]])
+    rows[1, [3, 4]] = (1.0, 2e-3) if pressed else (0.0, np.inf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib's singular-limits warning reached the users
+        plot_fluctuations(rows, tmp_path / "f.png")
+    assert (tmp_path / "f.png").stat().st_size > 10_000

@@ -118,23 +118,36 @@ def fluctuation_figures(rows: np.ndarray) -> dict:
 
 
 def plot_fluctuations(rows: np.ndarray, path: Path, title: str = "") -> None:
-    """Velocity fluctuations against strain and against the inertia number (log scales)."""
+    """Velocity fluctuations against strain and against the inertia number (log scales); a panel
+    with nothing to show says so (a lid that never pressed, grains at rest)."""
     from .plots import plt  # the package's Agg backend
 
+    rows = np.asarray(rows, dtype=float).reshape(-1, len(HEADER))
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
-    load = rows[:, W] < 0
-    pressed = np.isfinite(rows[:, INERTIA])
-    ax[0].semilogy(rows[load, STRAIN], rows[load, RMS], "o-", ms=3, label="rms")
-    ax[0].semilogy(rows[load, STRAIN], rows[load, MEDIAN], "s-", ms=3, label="median")
+    load = (rows[:, W] < 0) & (rows[:, RMS] > 0)
+    pressed = np.isfinite(rows[:, INERTIA]) & (rows[:, RMS] > 0)
+    for a in ax:
+        a.set_yscale("log")
+        a.grid(alpha=0.3, which="both")
+    ax[1].set_xscale("log")
+    if load.any():
+        ax[0].plot(rows[load, STRAIN], rows[load, RMS], "o-", ms=3, label="rms")
+        ax[0].plot(rows[load, STRAIN], rows[load, MEDIAN], "s-", ms=3, label="median")
+        ax[0].legend()
+    else:
+        ax[0].text(0.5, 0.5, "no grain moved while the lid came down", transform=ax[0].transAxes, ha="center")
     ax[0].set_xlabel("lid strain (loading)")
     ax[0].set_ylabel(r"grain velocity fluctuation / ($\dot\varepsilon\, d$)")
-    ax[0].legend()
-    ax[0].grid(alpha=0.3, which="both")
-    ax[1].loglog(rows[pressed, INERTIA], rows[pressed, RMS], "o", ms=3)
+    inertia = rows[pressed, INERTIA]
+    ax[1].set_xlim(min(1e-4, 0.5 * inertia.min(initial=1e-4)), max(1e-1, 2.0 * inertia.max(initial=1e-1)))
+    if pressed.any():
+        ax[1].plot(inertia, rows[pressed, RMS], "o", ms=3)
+    else:
+        ax[1].set_ylim(0.1, 100.0)
+        ax[1].text(0.5, 0.5, "the lid never pressed the pack", transform=ax[1].transAxes, ha="center")
     ax[1].axvline(QUASI_STATIC, color="grey", ls="--")
     ax[1].set_xlabel(r"inertia number $I = \dot\varepsilon\, d / \sqrt{P/\rho}$ (left of the line: quasi-static)")
     ax[1].set_ylabel(r"rms velocity fluctuation / ($\dot\varepsilon\, d$)")
-    ax[1].grid(alpha=0.3, which="both")
     if title:
         fig.suptitle(title)
     fig.tight_layout()
