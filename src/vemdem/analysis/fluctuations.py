@@ -30,12 +30,11 @@ are nanometres, whatever its stability.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
 
-from ..io.results import CsvLog
+from ..io.results import CsvLog, wall_force_record
 
 HEADER = ("time", "lid_velocity", "strain", "force", "inertia_number", "rms_fluctuation", "median_fluctuation")
 T, W, STRAIN, FORCE, INERTIA, RMS, MEDIAN = range(len(HEADER))
@@ -72,11 +71,7 @@ def lid_fluctuations(grains_csv: Path, walls_csv: Path, lid, start: float, floor
     scenario's PlaneWall (its motion gives the lid's height and velocity), `start` its height at
     t = 0. Frames at which the lid is at rest (its turning point) are left out."""  # fmt: skip
     table = np.atleast_1d(np.genfromtxt(grains_csv, delimiter=",", names=True))  # one row reads as 0-d
-    force = {}
-    with Path(walls_csv).open() as fh:
-        for row in csv.DictReader(fh):
-            if row["name"] == lid.name:
-                force[float(row["time"])] = float(row["fz"])
+    force = dict(zip(*wall_force_record(walls_csv, lid.name)))
     rows = []
     for t in np.unique(table["time"]):
         w = float(lid.motion.velocity(t)[2])

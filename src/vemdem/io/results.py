@@ -40,6 +40,17 @@ class CsvLog:
         self.close()
 
 
+def wall_force_record(walls_csv: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(times, fz) of the wall called `name` in a run's walls.csv, every frame in file order."""
+    times, force = [], []
+    with Path(walls_csv).open() as fh:
+        for row in csv.DictReader(fh):
+            if row["name"] == name:
+                times.append(float(row["time"]))
+                force.append(float(row["fz"]))
+    return np.array(times), np.array(force)
+
+
 def _plain(v):
     if isinstance(v, (float, np.floating)):
         return repr(float(v))

@@ -14,7 +14,6 @@ per frame: how quasi-static the cycle was, analysis.fluctuations) and the scene 
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_walls
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
-from ..io.results import write_json
+from ..io.results import wall_force_record, write_json
 from ..solver.api import make_integrator
 from .identity import run_identity
 from .pack import initial_state_from
@@ -48,16 +47,10 @@ def lid_curve(walls_csv: Path, lid: PlaneWall, start: float, turn: float):
     """(phase, strain, force) of every frame, from the lid's rows of walls.csv: the one record
     that holds every frame of a run resumed from a checkpoint (the loop truncates it to the
     checkpoint's frame and appends), where frames kept in memory would start at the resume."""
-    times, force = [], []
-    with walls_csv.open() as fh:
-        for row in csv.DictReader(fh):
-            if row["name"] == "lid":
-                times.append(float(row["time"]))
-                force.append(float(row["fz"]))
-    times = np.array(times)
+    times, force = wall_force_record(walls_csv, lid.name)
     height = start + np.array([lid.motion.displacement(t)[2] for t in times])
     phase = np.where(times <= turn * (1 + 1e-12), "load", "unload")
-    return phase, (start - height) / start, np.array(force)
+    return phase, (start - height) / start, force
 
 
 def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict) -> dict:
