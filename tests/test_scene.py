@@ -36,7 +36,11 @@ def test_scene_outputs_follow_the_contract(tmp_path):
         assert key in summary
     assert json.loads((tmp_path / "summary.json").read_text())["n_grains"] == 2
     history = rows(tmp_path / "history.csv")
-    assert history[0] == ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work"]
+    assert history[0] == ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work",
+                          "elastic_slip"]  # fmt: skip
+    # two grains dropped on a floor: their friction springs stay far inside the contact layer
+    assert summary["friction"]["beyond_contact_layer"] is False
+    assert 0.0 <= summary["friction"]["elastic_slip_max"] < summary["contact"]["activation_gap"]
     assert len(history) == 1 + 5  # t = 0 and four frames
     grains = rows(tmp_path / "grains.csv")
     assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]

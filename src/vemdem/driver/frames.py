@@ -12,11 +12,25 @@ from ..io.vtk import PvdSeries
 from ..model.scene import Scene
 from ..solver.state import State
 
-# wall_work: the work the moving walls did on the grains since the start (J; driver.checkpoint.WallWork)
-HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work"]
+# wall_work: the work the moving walls did on the grains since the start (J; driver.checkpoint.WallWork);
+# elastic_slip: the 99th percentile of the pairs' stored elastic tangential slip |g_t| (m;
+# summary.friction_reach: a slip beyond the contact layer means the load outgrew the friction spring)
+HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work",
+                  "elastic_slip"]  # fmt: skip
 GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
 WALLS_HEADER = ["time", "wall", "name", "fx", "fy", "fz"]  # force of the grains on each wall (N)
 FRAME_CSVS = ("history.csv", "grains.csv", "walls.csv")
+
+
+SLIP_PERCENTILE = 99.0
+
+
+def elastic_slip(gt: np.ndarray) -> float:
+    """The SLIP_PERCENTILE-th percentile of |g_t| over the pairs (m; 0 without pairs): how far the
+    friction springs are stretched. A pair reaches its Coulomb limit at |g_t| = mu F_N / eps_t."""
+    if not len(gt):
+        return 0.0
+    return float(np.percentile(np.linalg.norm(gt, axis=1), SLIP_PERCENTILE))
 
 
 class FrameWriter:
@@ -37,7 +51,8 @@ class FrameWriter:
     def write(self, state: State, strain: float, contact_result, wall_work: float = 0.0):
         s = self.scene
         self.history.write(state.t, s.kinetic_energy(state.v, self.lumped), strain, s.gravity_energy(state.x, self.lumped),
-                           contact_result.energy, state.dissipated, contact_result.n_contacts, wall_work)  # fmt: skip
+                           contact_result.energy, state.dissipated, contact_result.n_contacts, wall_work,
+                           elastic_slip(state.history.gt))  # fmt: skip
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
         self.grains.write_rows([[state.t, g, *c[g], *vc[g]] for g in range(s.n_grains)])

@@ -5,9 +5,14 @@ from __future__ import annotations
 
 import csv
 import time
+import warnings
 
 from ..model.scene import Scene
 from .loop import Run
+
+
+class FrictionSpringWarning(UserWarning):
+    """The pairs' elastic tangential slip outgrew the contact layer (friction_reach)."""
 
 
 def energy_balance(history_csv, since: float | None = None) -> dict | None:
@@ -48,6 +53,37 @@ def energy_balance(history_csv, since: float | None = None) -> dict | None:
     }
 
 
+def friction_reach(history_csv, activation_gap: float, tangential_penalty: float) -> dict:
+    """summary.json's "friction": the largest elastic tangential slip of the pairs over the run's
+    frames (history.csv's elastic_slip, a 99th percentile over the pairs) and when it was reached.
+
+    A pair sticks while eps_t |g_t| <= mu F_N, so it slides only after an elastic slip of
+    mu F_N / eps_t. The default eps_t is the normal stiffness at the switch gap, 2 F_ref / (gbar -
+    gbb): made for forces near F_ref (10 grain weights). Under loads far above it (a lid at the real
+    density: 1e3-1e5 F_ref per contact) that slip grows beyond the contact layer gbar, and
+    friction is barely mobilised: the 515-grain lid cycle's side walls carried 0.002-0.007 of their
+    normal force as friction with mu = 0.15 (docs/results.md, "The real-density jam has almost no
+    friction"). Such a run warns (FrictionSpringWarning) and says what to set."""
+    try:
+        with open(history_csv) as fh:
+            rows = [r for r in csv.DictReader(fh) if r.get("elastic_slip") not in (None, "")]
+    except OSError:
+        rows = []
+    if not rows:
+        return {"elastic_slip_max": None, "reason": "no frames with the elastic slip recorded"}
+    worst = max(rows, key=lambda r: float(r["elastic_slip"]))
+    slip = float(worst["elastic_slip"])
+    record = {"elastic_slip_max": slip, "time": float(worst["time"]), "activation_gap": activation_gap,
+              "beyond_contact_layer": slip > activation_gap}  # fmt: skip
+    if slip > activation_gap:
+        warnings.warn(FrictionSpringWarning(
+            f"friction springs stretched to {slip * 1e6:.3g} um at t = {record['time']:.6g} s (99th percentile of the "
+            f"pairs' elastic tangential slip), beyond the contact layer ({activation_gap * 1e6:.3g} um): the contact "
+            f"forces outgrew the tangential penalty ({tangential_penalty:.3g} N/m), so friction was barely mobilised; "
+            "set [contact] reference_force to the expected force per contact (docs/contact.md)"), stacklevel=2)  # fmt: skip
+    return record
+
+
 def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = None) -> dict:
     """t_start: perf_counter() when the scenario began (building included); else the loop's own time."""
     stats, state = run.stats, run.state
@@ -82,6 +118,8 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
             "damping_ratio": scene.contact.friction.damping_ratio,
             "edge_fade": scene.contact.law.edge_fade,
         },
+        "friction": friction_reach(run.out_dir / "history.csv", scene.contact.law.activation_gap,
+                                   scene.contact.friction.tangential_penalty) if run.out_dir is not None else None,
     }
 
 
