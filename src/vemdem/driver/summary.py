@@ -79,8 +79,10 @@ def friction_reach(history_csv, activation_gap: float, tangential_penalty: float
         warnings.warn(FrictionSpringWarning(
             f"friction springs stretched to {slip * 1e6:.3g} um at t = {record['time']:.6g} s (99th percentile of the "
             f"pairs' elastic tangential slip), beyond the contact layer ({activation_gap * 1e6:.3g} um): the contact "
-            f"forces outgrew the tangential penalty ({tangential_penalty:.3g} N/m), so friction was barely mobilised; "
-            "set [contact] reference_force to the expected force per contact (docs/contact.md)"), stacklevel=2)  # fmt: skip
+            f"forces outgrew the tangential penalty ({tangential_penalty:.3g} N/m), and pairs slide only after that "
+            "much slip (under a lid at the real density friction is then barely mobilised); for loads far above the "
+            "grains' weight set [contact] reference_force to the expected force per contact (docs/contact.md)"),
+            stacklevel=2)  # fmt: skip
     return record
 
 
