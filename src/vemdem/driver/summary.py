@@ -15,6 +15,15 @@ class FrictionSpringWarning(UserWarning):
     """The pairs' elastic tangential slip outgrew the contact layer (friction_reach)."""
 
 
+def history_rows(history_csv) -> list[dict]:
+    """The frames of a run's history.csv as dicts of strings; none where the file cannot be read."""
+    try:
+        with open(history_csv) as fh:
+            return list(csv.DictReader(fh))
+    except OSError:
+        return []
+
+
 def energy_balance(history_csv, since: float | None = None) -> dict | None:
     """From the first and last frames of history.csv: the mechanical energy E = kinetic + strain +
     gravity + contact at both, what damping and friction dissipated between them, the potential
@@ -24,11 +33,7 @@ def energy_balance(history_csv, since: float | None = None) -> dict | None:
     a removed wall takes its contact energy with it). `since`: from the first frame at or after
     that time (a scenario that works on the grains until then, as the tilting box turning
     gravity). None when there are fewer than two frames."""
-    try:
-        with open(history_csv) as fh:
-            rows = list(csv.DictReader(fh))
-    except OSError:
-        return None
+    rows = history_rows(history_csv)
     if since is not None:
         rows = [r for r in rows if float(r["time"]) >= since]
     if len(rows) < 2:
@@ -64,11 +69,7 @@ def friction_reach(history_csv, activation_gap: float, tangential_penalty: float
     friction is barely mobilised: the 515-grain lid cycle's side walls carried 0.002-0.007 of their
     normal force as friction with mu = 0.15 (docs/results.md, "The real-density jam has almost no
     friction"). Such a run warns (FrictionSpringWarning) and says what to set."""
-    try:
-        with open(history_csv) as fh:
-            rows = [r for r in csv.DictReader(fh) if r.get("elastic_slip") not in (None, "")]
-    except OSError:
-        rows = []
+    rows = [r for r in history_rows(history_csv) if r.get("elastic_slip") not in (None, "")]
     if not rows:
         return {"elastic_slip_max": None, "reason": "no frames with the elastic slip recorded"}
     worst = max(rows, key=lambda r: float(r["elastic_slip"]))
