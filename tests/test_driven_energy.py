@@ -115,3 +115,44 @@ def test_a_gain_halving_does_not_shrink_is_accepted_after_one_halving(kind, monk
         assert (stats.rejections.get("energy", 0), stats.energy_gains) == (1, 1)
     else:
         assert (stats.rejections.get("energy", 0), stats.energy_gains) == (2, 0)
+
+
+def thrown_grain(scale: float):
+    """A cube of equivalent diameter SIZE half a layer above a floor, thrown down at 0.5 sqrt(scale)
+    m/s, without gravity, its material `scale` times stiffer and its contact law made for `scale`
+    times its weight: for every scale the same motion, on a time scale sqrt(scale) times shorter
+    and an energy scale `scale` times larger."""
+    material = Material(STIFF.E * scale, STIFF.nu, STIFF.density)
+    weight_law, _ = default_contact_laws(SIZE, STIFF.E, STIFF.density)
+    law, friction = default_contact_laws(SIZE, material.E, material.density, damping_ratio=0.0,
+                                         reference_force=scale * weight_law.switch_force)  # fmt: skip
+    grain = cube(SIZE * (np.pi / 6) ** (1 / 3))  # its mass is the one the weight law assumes
+    grain = grain.translated((0.0, 0.0, 0.5 * law.activation_gap - grain.vertices[:, 2].min()))
+    floor = PlaneWall(np.zeros(3), np.array([0.0, 0.0, 1.0]), name="floor")
+    scene = Scene.build([grain], material, law, friction, planes=[floor], gravity=(0.0, 0.0, 0.0))
+    v0 = np.zeros_like(scene.bodies.reference)
+    v0[:, 2] = -0.5 * np.sqrt(scale)
+    return scene, v0
+
+
+def test_the_guard_judges_a_gain_on_the_contact_laws_energy_scale():
+    """The energy guard's tolerance follows the contact law's force scale (newmark.energy_tolerance):
+    the same bounce on an energy scale 1e4 times larger is rejected at the same steps and ends in
+    the same state. With the tolerance tied to the grain's own weight (the code before), the larger
+    scale made the same relative gains 1e4 times too large: the 515-grain lid jam with
+    `reference_force = 0.1` N rejected one step in ten for gains of 1e-8-4e-7 J against 3.8e-9 J,
+    its lid doing 2e-7-1e-5 J per step (docs/dynamics.md)."""
+    ends = []
+    for scale in (1.0, 1e4):
+        scene, v0 = thrown_grain(scale)
+        tick = 1.0 / np.sqrt(scale)
+        control = StepControl(dt=1e-4 * tick, dt_max=1e-4 * tick, dt_min=1e-12 * tick)
+        stats = RunStats()
+        end, stats = advance(scene, initial_state(scene, v0=v0), 0.015 * tick, control, NewmarkParameters(0.25, 0.5),
+                             stats=stats)  # fmt: skip
+        ends.append((end.x, end.v / np.sqrt(scale), stats.accepted, dict(stats.rejections)))
+    (x1, v1, n1, rej1), (x2, v2, n2, rej2) = ends
+    assert rej1.get("energy", 0) > 0  # the guard was needed
+    assert (n2, rej2) == (n1, rej1)
+    np.testing.assert_allclose(x2, x1, rtol=0, atol=1e-9 * SIZE)
+    np.testing.assert_allclose(v2, v1, rtol=0, atol=1e-6 * np.abs(v1).max())

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from .broad import candidate_pairs, grain_boxes
+from .defaults import FORCE_MULTIPLE
 from .forces import (
     contact_points,
     csr_from_triplets,
@@ -368,6 +369,12 @@ class ContactModel:
     def walls_move(self) -> bool:
         """Whether any wall has a prescribed motion (a removal alone is not one)."""
         return any(w.motion.moves for w in self.meshes + self.planes)
+
+    def reference_weight(self) -> float:
+        """The grain weight the normal law was made for: its reference force (the force at the switch
+        gap) over FORCE_MULTIPLE, the grain's own weight under the default weight law
+        (contact/defaults.py), more where `reference_force` set the law for a lid's load."""
+        return self.law.switch_force / FORCE_MULTIPLE
 
     def wall_work(self, t0: float, t1: float, reactions0: np.ndarray, reactions1: np.ndarray) -> float:
         """Work of the walls' prescribed motion on the grains from t0 to t1: minus the grains' force

@@ -482,10 +482,14 @@ def _wall_reactions_at(scene: Scene, state: State) -> np.ndarray:
 
 
 def energy_tolerance(scene: Scene, control: StepControl) -> float:
-    """Largest energy gain a step may make: control.energy_growth times sum m g d (the work of
-    lifting every grain by its own size); 0 turns the check off."""
+    """Largest energy gain a step may make: control.energy_growth times sum W d, the work of lifting
+    every grain by its own size under a weight W. W is the grain's own, or, where the contact law
+    was made for larger loads (`reference_force`, a lid), the weight that law's reference force
+    stands for (ContactModel.reference_weight): the contact energies the check judges scale with
+    F_ref, so must the tolerance (docs/dynamics.md "Energy never grows"). 0 turns the check off."""
     g = max(float(np.linalg.norm(scene.gravity)), 9.81)
-    return control.energy_growth * scene.total_mass() * g * scene.grain_size
+    weight = max(scene.total_mass() * g, scene.n_grains * scene.contact.reference_weight())
+    return control.energy_growth * weight * scene.grain_size
 
 
 def advance(scene: Scene, state: State, t_end: float, control: StepControl, params: NewmarkParameters,
