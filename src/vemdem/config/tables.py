@@ -163,8 +163,9 @@ SOLVER = {
     ),
     "energy_growth": Field(
         float, 1e-3, non_negative,
-        "implicit: a step that raises the total energy by more than this share of sum m g d is halved (0: off; "
-        "m g: the grain's weight, or the weight the contact law was made for where larger: docs/dynamics.md)",
+        "implicit: a step that raises the total energy by more than this share of W d is halved (0: off; "
+        "W: the grains' weight, or the load the walls carry where larger, up to the weight the contact law "
+        "was made for: docs/dynamics.md)",
     ),
     "safety": Field(float, 0.5, _in(0, 1, lo_open=True), "explicit: share of the critical step taken"),
     "mass_damping": Field(float, 0.0, non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
