@@ -352,6 +352,16 @@ def grain_speeds(v, mass, vptr):
 
 
 @njit(cache=True)
+def max_displacement(x, x0):
+    """Largest |x_i - x0_i| (the Verlet list's test: one pass instead of four array operations)."""
+    most = 0.0
+    for i in range(len(x)):
+        d = (x[i, 0] - x0[i, 0]) ** 2 + (x[i, 1] - x0[i, 1]) ** 2 + (x[i, 2] - x0[i, 2]) ** 2
+        most = max(most, d)
+    return np.sqrt(most)
+
+
+@njit(cache=True)
 def plane_distances(x, vptr, point, normal):
     """Signed distance of each grain's lowest vertex over the plane (point, normal)."""
     G = len(vptr) - 1

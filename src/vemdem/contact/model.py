@@ -33,6 +33,7 @@ from .forces import (
     scatter_pair_tangents,
 )
 from .friction import MU_D, MU_S, FrictionLaw, dissipative_forces, dissipative_terms
+from .feature_list import FeatureList
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE
 from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
@@ -211,6 +212,7 @@ class ContactModel:
         self._plane_frames = [self._plane_frame(pl.normal, size) for pl in self.planes]
         self._plane_normals = np.array([pl.normal for pl in self.planes], float).reshape(-1, 3)
         self._wall_nodes_at = None  # (t, the wall nodes at t): wall_nodes' last answer
+        self._wall_velocities_at = None  # the same for _wall_velocities
         mesh_vertices = [np.asarray(m.vertices, float) for m in self.meshes]
         surf_ptr = np.concatenate([self.vertex_ptr, self.n_vertices + np.cumsum([0] + [len(v) for v in mesh_vertices])[1:]])
         all_ref = np.vstack([reference] + mesh_vertices) if mesh_vertices else reference
@@ -219,6 +221,13 @@ class ContactModel:
         self.n_mesh_nodes = len(all_ref) - self.n_vertices
         self.plane_node0 = len(all_ref)  # plane nodes follow the mesh walls' nodes
         self.plane_face_base = len(self.topology.faces)
+        self.feature_list: FeatureList | None = None  # keep_feature_list
+
+    def keep_feature_list(self, skin: float) -> None:
+        """Answer `pairs` from a Verlet list of feature pairs (contact/feature_list.py): the same
+        records, found in a third of the time where grains move little between calls (the explicit
+        integrators' steps: docs/contact.md)."""
+        self.feature_list = FeatureList(skin)
 
     @staticmethod
     def _plane_frame(normal, size):
@@ -267,7 +276,10 @@ class ContactModel:
         """Eligible pairs within the activation gap (or within `reach`, to look ahead)."""
         x_all = self.all_positions(x, t)
         gbar = self.law.activation_gap if reach is None else reach
-        ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
+        if reach is None and self.feature_list is not None:
+            ints, floats = self.feature_list.find(x_all, candidates, self.topology, gbar)
+        else:
+            ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
         if len(floats) and floats[:, GAP].min() <= self.touching_gap:
             c = int(np.argmin(floats[:, GAP]))
             raise PenetrationError(f"grains {ints[c, GRAIN_A]} and {ints[c, GRAIN_B]} touch (gap {floats[c, GAP]:.3g} m, "
@@ -361,9 +373,15 @@ class ContactModel:
         return max((float(np.linalg.norm(w.motion.velocity(t))) for w in self.planes + self.meshes), default=0.0)
 
     def _wall_velocities(self, t):
+        """Velocities of the walls' nodes at t (read-only, kept for the last t as wall_nodes)."""
+        if self._wall_velocities_at is not None and self._wall_velocities_at[0] == t:
+            return self._wall_velocities_at[1]
         vel = [np.repeat(m.motion.velocity(t)[None, :], len(m.vertices), axis=0) for m in self.meshes]
         vel += [np.repeat(pl.motion.velocity(t)[None, :], 3, axis=0) for pl in self.planes]
-        return np.vstack(vel) if vel else np.zeros((0, 3))
+        out = np.vstack(vel) if vel else np.zeros((0, 3))
+        out.setflags(write=False)
+        self._wall_velocities_at = (t, out)
+        return out
 
     @property
     def walls_move(self) -> bool:

@@ -297,18 +297,17 @@ def _record(ints, floats, n, cap, kind, A, B, fa, fb, n0, n1, n2, n3, c0, c1, ga
 
 
 @njit(cache=True)
-def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats):  # fmt: skip
-    """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
-    Returns the number found (which may exceed the capacity: then the caller retries)."""
-    cap = len(ints)
-    n = np.int64(0)  # typed, as the kinds below: numba compiles _record once per literal argument value
+def near_features(x, A, B, reach, vptr, fptr, eptr, v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox,
+                  ebox):  # fmt: skip
+    """(vA, fA, eA, vB, fB, eB): the vertices, faces and edges of grains A and B that may lie within
+    `reach` of the other grain (boxes and the slab); empty when the grains are farther apart."""
     box = np.empty((4, 3))
-    _region(glo, ghi, A, B, gbar, box[0], box[1])
-    _region(glo, ghi, B, A, gbar, box[2], box[3])
+    _region(glo, ghi, A, B, reach, box[0], box[1])
+    _region(glo, ghi, B, A, reach, box[2], box[3])
+    none = np.empty(0, dtype=np.int64)
     for a in range(3):
         if box[0, a] > box[1, a] or box[2, a] > box[3, a]:
-            return 0  # the boxes are more than gbar apart
+            return none, none, none, none, none, none  # the boxes are more than reach apart
     nA, nB = vptr[A + 1] - vptr[A], vptr[B + 1] - vptr[B]
     sizeA = nA + fptr[A + 1] - fptr[A] + eptr[A + 1] - eptr[A]
     sizeB = nB + fptr[B + 1] - fptr[B] + eptr[B + 1] - eptr[B]
@@ -317,55 +316,90 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
     axis, has_axis = _slab_axis(glo, ghi, A, B)
     minA, maxA = _project(x, vptr[A], vptr[A + 1], axis, proj[:nA])
     minB, maxB = _project(x, vptr[B], vptr[B + 1], axis, proj[nA:])
-    reach = gbar * (1.0 + SLAB_MARGIN)
+    slab = reach * (1.0 + SLAB_MARGIN)
     if not has_axis:  # coinciding box centres: no slab
         maxA, minB = np.inf, -np.inf
-    elif maxA + reach < minB:
-        return 0  # a plane between the grains, more than gbar from each
+    elif maxA + slab < minB:
+        return none, none, none, none, none, none  # a plane between the grains, more than reach from each
     marks = buf[sizeA + sizeB :]
     marks[:] = 0
-    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, fbox, ebox, proj[:nA], 1.0, minB - reach,
+    vA, fA, eA = _features_near(x, A, box[0], box[1], vptr, fptr, eptr, fbox, ebox, proj[:nA], 1.0, minB - slab,
                                 v_face_ptr, v_faces, v_edge_ptr, v_edges, buf[:sizeA], marks[: sizeA - nA])  # fmt: skip
-    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, fbox, ebox, proj[nA:], -1.0, maxA + reach,
+    vB, fB, eB = _features_near(x, B, box[2], box[3], vptr, fptr, eptr, fbox, ebox, proj[nA:], -1.0, maxA + slab,
                                 v_face_ptr, v_faces, v_edge_ptr, v_edges, buf[sizeA : sizeA + sizeB],
                                 marks[sizeA - nA :])  # fmt: skip
+    return vA, fA, eA, vB, fB, eB
+
+
+# The exact test of one feature pair and its record if eligible (returns the new count): the
+# search below and the feature list (contact/feature_list.py) call the same four, so that both
+# find the same records.
+@njit(cache=True)
+def vf_record(x, p, f, ga, gb, faces, gbar, ints, floats, n, cap):
+    d, u, v = _vf_gap(x, p, f, faces, gbar)
+    if d >= 0.0:
+        n = _record(ints, floats, n, cap, np.int64(VERTEX_FACE), ga, gb, p, f, p, faces[f, 0], faces[f, 1], faces[f, 2],
+                    u, v, d)  # fmt: skip
+    return n
+
+
+@njit(cache=True)
+def ee_record(x, ea, eb, A, B, edges, edge_type, gbar, ints, floats, n, cap):
+    d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
+    if d >= 0.0:
+        n = _record(ints, floats, n, cap, np.int64(EDGE_EDGE), A, B, ea, eb, edges[ea, 0], edges[ea, 1], edges[eb, 0],
+                    edges[eb, 1], s, t, d)  # fmt: skip
+    return n
+
+
+@njit(cache=True)
+def ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap):
+    d, t = _ve_gap(x, p, e, edges, gbar)
+    if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
+        n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
+                    np.int64(-1), t, 0.0, d)  # fmt: skip
+    return n
+
+
+@njit(cache=True)
+def vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar, ints, floats, n, cap):
+    d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
+    if d <= gbar and _vertex_vertex_survives(x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar):
+        n = _record(ints, floats, n, cap, np.int64(VERTEX_VERTEX), A, B, p, q, p, q, np.int64(-1), np.int64(-1), 0.0,
+                    0.0, d)  # fmt: skip
+    return n
+
+
+@njit(cache=True)
+def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats):  # fmt: skip
+    """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
+    Returns the number found (which may exceed the capacity: then the caller retries)."""
+    cap = len(ints)
+    n = np.int64(0)  # typed, as the kinds below: numba compiles _record once per literal argument value
+    vA, fA, eA, vB, fB, eB = near_features(x, A, B, gbar, vptr, fptr, eptr, v_face_ptr, v_faces, v_edge_ptr, v_edges,
+                                           glo, ghi, fbox, ebox)  # fmt: skip
     # vertex-face, both ways: the vertex's grain is side "A" of the record
     for side in range(2):
         verts, fcs, ga, gb = (vA, fB, A, B) if side == 0 else (vB, fA, B, A)
         for p in verts:
             for f in fcs:
-                if not _point_near_box(x, p, fbox, f, gbar):
-                    continue
-                d, u, v = _vf_gap(x, p, f, faces, gbar)
-                if d >= 0.0:
-                    n = _record(ints, floats, n, cap, np.int64(VERTEX_FACE), ga, gb, p, f, p, faces[f, 0], faces[f, 1],
-                                faces[f, 2], u, v, d)  # fmt: skip
+                if _point_near_box(x, p, fbox, f, gbar):
+                    n = vf_record(x, p, f, ga, gb, faces, gbar, ints, floats, n, cap)
     for ea in eA:
         for eb in eB:
-            if not _boxes_near(ebox, ea, eb, gbar):
-                continue
-            d, s, t = _ee_gap(x, ea, eb, edges, edge_type, gbar)
-            if d >= 0.0:
-                n = _record(ints, floats, n, cap, np.int64(EDGE_EDGE), A, B, ea, eb, edges[ea, 0], edges[ea, 1],
-                            edges[eb, 0], edges[eb, 1], s, t, d)  # fmt: skip
+            if _boxes_near(ebox, ea, eb, gbar):
+                n = ee_record(x, ea, eb, A, B, edges, edge_type, gbar, ints, floats, n, cap)
     for side in range(2):
         verts, eds, ga, gb = (vA, eB, A, B) if side == 0 else (vB, eA, B, A)
         for p in verts:
             for e in eds:
-                if not _point_near_box(x, p, ebox, e, gbar):
-                    continue
-                d, t = _ve_gap(x, p, e, edges, gbar)
-                if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
-                    n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
-                                np.int64(-1), t, 0.0, d)  # fmt: skip
+                if _point_near_box(x, p, ebox, e, gbar):
+                    n = ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap)
     for p in vA:
         for q in vB:
-            d = np.sqrt((x[p, 0] - x[q, 0]) ** 2 + (x[p, 1] - x[q, 1]) ** 2 + (x[p, 2] - x[q, 2]) ** 2)
-            if d <= gbar and _vertex_vertex_survives(
-                x, p, q, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar
-            ):
-                n = _record(ints, floats, n, cap, np.int64(VERTEX_VERTEX), A, B, p, q, p, q, np.int64(-1), np.int64(-1),
-                            0.0, 0.0, d)  # fmt: skip
+            n = vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar, ints, floats, n,
+                          cap)  # fmt: skip
     return n
 
 

@@ -58,7 +58,7 @@ class Motion:
     def active(self, t: float) -> bool:
         return t < self.removed_at
 
-    @property
+    @cached_property  # asked at every step (the energy books' wall work)
     def moves(self) -> bool:
         """Whether the displacement history ever changes (a removal alone is not a motion)."""
         return bool(np.ptp(np.asarray(self.displacements, float), axis=0).any())

@@ -1,0 +1,157 @@
+"""The narrow phase's feature list (contact/feature_list.py) finds the search's records, bit for
+bit, in the same order: along moving, deforming, jumping and approaching grains, against a mesh
+wall, and through whole explicit runs (the reference is pairs.find_contacts, the full search)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vemdem.config.build import scene_from, solver_options_from
+from vemdem.contact.broad import candidate_pairs
+from vemdem.contact.feature_list import FeatureList
+from vemdem.contact.narrow import EDGE_EDGE, VERTEX_FACE
+from vemdem.contact.pairs import find_contacts
+from vemdem.contact.topology import build_topology
+from vemdem.geometry import cube, rotation_matrix
+from vemdem.io.state import load_state
+from vemdem.scenarios.pile_collapse import standing_walls
+from vemdem.scenarios.registry import checked_config
+from vemdem.solver.api import make_integrator
+from vemdem.solver.explicit import advance_explicit
+
+PACK = Path(__file__).parent / "data" / "pack30_mu015.npz"
+GBAR = 1.5e-5  # the law's activation gap for these 1.45 mm grains, about
+
+
+def _same(a, b):
+    return np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+@pytest.fixture(scope="module")
+def pack():
+    s = load_state(PACK)
+    vptr = np.cumsum([0] + [g.n_vertices for g in s.grains])
+    topo = build_topology(s.x, [g.faces for g in s.grains], vptr)
+    return s.x.copy(), topo, vptr
+
+
+def _moved(x0, vptr, rng, scale):
+    """x0 with every grain turned and shifted at random (rigid), its vertices jittered (a deformation)."""
+    x = x0.copy()
+    for g in range(len(vptr) - 1):
+        sl = slice(vptr[g], vptr[g + 1])
+        c = x0[sl].mean(axis=0)
+        R = rotation_matrix(rng.normal(scale=scale / 7e-4, size=3))  # turns a vertex 7e-4 m out by about scale
+        x[sl] = (x0[sl] - c) @ R.T + c + rng.normal(scale=scale, size=3)
+    return x + rng.normal(scale=0.05 * scale, size=x.shape)
+
+
+def test_the_list_finds_the_searchs_records_along_a_trajectory(pack):
+    """300 calls, each grain moving 0.1-0.3 gbar per call (turn, shift, jitter): the same records every
+    time, while most grain pairs' lists are kept and some are rebuilt."""
+    x0, topo, vptr = pack
+    rng = np.random.default_rng(5)
+    fl = FeatureList(2 * GBAR)
+    x = x0.copy()
+    calls = kept_pairs = 0
+    for k in range(300):
+        if k % 10 == 0:
+            candidates = candidate_pairs(x, vptr, 5 * GBAR)
+        x = _moved(x, vptr, rng, GBAR * rng.uniform(0.05, 0.15))
+        expected = find_contacts(x, candidates, topo, GBAR)
+        assert len(expected[0]) > 20  # a pack in contact, not a vacuous comparison
+        assert _same(fl.find(x, candidates, topo, GBAR), expected), f"call {k}"
+        calls += len(candidates)
+        kept_pairs = calls - fl.builds
+    assert fl.builds > 2 * len(candidates)  # lists were rebuilt as the grains travelled
+    assert kept_pairs > 0.5 * calls  # and most were kept
+
+
+def test_a_jump_rebuilds_every_list(pack):
+    x0, topo, vptr = pack
+    fl = FeatureList(2 * GBAR)
+    candidates = candidate_pairs(x0, vptr, 5 * GBAR)
+    fl.find(x0, candidates, topo, GBAR)
+    x = _moved(x0, vptr, np.random.default_rng(1), 3 * GBAR)  # far beyond the skin in one call
+    before = fl.builds
+    assert _same(fl.find(x, candidates, topo, GBAR), find_contacts(x, candidates, topo, GBAR))
+    assert fl.builds - before == len(candidates)
+
+
+def test_approaching_cubes_meet_in_several_kinds():
+    """Two cubes closing face to face from 4 gbar to 0.05 gbar, the upper one turned about the
+    vertical and shifted, so that vertex-face (both ways) and edge-edge records appear: the same
+    records at every step of the approach."""
+    gbar = 0.05
+    a = cube(1.0)
+    R = rotation_matrix([0.0, 0.0, 0.1])
+    b_ref = a.vertices @ R.T
+    vptr = np.array([0, 8, 16])
+    X = np.vstack([a.vertices, b_ref])
+    topo = build_topology(X, [a.faces, a.faces], vptr)
+    fl = FeatureList(0.5 * gbar)
+    kinds = set()
+    base = 0.5 - b_ref[:, 2].min()
+    for gap in np.linspace(4 * gbar, 0.05 * gbar, 60):
+        x = np.vstack([a.vertices, b_ref + [0.3, 0.2, base + gap]])
+        candidates = candidate_pairs(x, vptr, 6 * gbar)
+        expected = find_contacts(x, candidates, topo, gbar)
+        assert _same(fl.find(x, candidates, topo, gbar), expected)
+        kinds |= set(expected[0][:, 0].tolist())
+    assert kinds >= {VERTEX_FACE, EDGE_EDGE}
+
+
+def test_a_mesh_wall_is_a_body_of_the_list():
+    """A cube sliding and sinking onto a triangulated floor (a mesh wall: one more body of the
+    topology, paired with the grain)."""
+    gbar = 0.05
+    c = cube(1.0)
+    floor = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0], [0, 0, 0]], float)
+    floor_faces = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    vptr = np.array([0, 8, 13])
+    topo = build_topology(np.vstack([c.vertices, floor]), [c.faces, floor_faces], vptr)
+    fl = FeatureList(gbar)
+    pairs = np.array([[0, 1]])
+    R = rotation_matrix(0.02 * np.array([0.2, 1.0, 0.1]))
+    for k in range(80):
+        lift = 0.5 + 2 * gbar - k * 0.024 * gbar
+        x = np.vstack([c.vertices @ R.T + [0.01 * k, 0.0, lift], floor])
+        assert _same(fl.find(x, pairs, topo, gbar), find_contacts(x, pairs, topo, gbar)), f"call {k}"
+
+
+def test_new_positions_of_another_size_start_a_new_list(pack):
+    x0, topo, vptr = pack
+    fl = FeatureList(2 * GBAR)
+    fl.find(x0, candidate_pairs(x0, vptr, 5 * GBAR), topo, GBAR)
+    a = cube(1.0)
+    small = build_topology(np.vstack([a.vertices, a.vertices + [0, 0, 1.02]]), [a.faces, a.faces], np.array([0, 8, 16]))
+    x = np.vstack([a.vertices, a.vertices + [0, 0, 1.02]])
+    assert _same(fl.find(x, np.array([[0, 1]]), small, 0.05), find_contacts(x, np.array([[0, 1]]), small, 0.05))
+
+
+def test_a_skin_must_be_positive():
+    with pytest.raises(ValueError, match="skin must be > 0"):
+        FeatureList(0.0)
+
+
+@pytest.mark.parametrize("grains", ["rigid", "flexible"])
+def test_explicit_runs_are_the_same_with_and_without_the_list(grains):
+    """The 30-grain pack's walls opened, 10 ms of explicit steps (rigid grains at the real density,
+    flexible ones with mass scaling 1e6): the same state to the bit with the list as with the full search."""
+    cfg, _ = checked_config({"scenario": "pile_collapse", "initial_state": str(PACK), "model": {"grains": grains},
+                             "solver": {"integrator": "explicit", "mass_scaling": 1.0 if grains == "rigid" else 1e6}})  # fmt: skip
+    s = load_state(PACK)
+    ends = []
+    for keep in (True, False):
+        scene = scene_from(s.grains, cfg, standing_walls(s.meta, "corner"))
+        runner = make_integrator(solver_options_from(cfg), scene)
+        assert scene.contact.feature_list is not None  # the explicit integrators keep one
+        if not keep:
+            scene.contact.feature_list = None
+        state = runner.initial_state(s.x, s.v)
+        state, stats = advance_explicit(runner.integrator, state, 0.01, runner.control)
+        ends.append((state, stats.accepted))
+    (a, steps), (b, _) = ends
+    assert steps > 50 and np.abs(a.x - s.x).max() > GBAR  # the grains moved
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
