@@ -11,10 +11,11 @@ minute; kept and reused by later runs). The walls are those of the collapse (the
 `--steps` of the collapse: a dense pack whose front starts to move. One warm-up step first (numba
 compilation excluded).
 
-Prints steps per second, grain-steps per second and per CPU-second (wall x numba threads), and the
-pieces of a step, each timed on its own at the end state: the contact search (broad phase), the
-narrow phase (`find_contacts`), the contact forces, the rigid kinematics (free rotation, vertex
-placement and velocities) and the step limits. The reference point of issue 16: rigid polyhedra in
+Prints steps per second, grain-steps per second and per CPU-second (wall x numba threads), how many
+grain pairs' feature lists (contact/feature_list.py) were rebuilt per step, and the pieces of a
+step, each timed on its own at the end state: the contact search (broad phase), the narrow phase
+(the full search `find_contacts`, and the feature list with every list kept), the contact
+forces, the rigid kinematics (free rotation, vertex placement and velocities) and the step limits. The reference point of issue 16: rigid polyhedra in
 other DEM codes cost about 0.3 CPU-s per step for a 515-grain dense pack (600-1,600 grain-steps per
 CPU-second). Nothing here asserts a timing.
 """
@@ -64,9 +65,11 @@ def measure(cfg: dict, pack, steps: int) -> dict:
     control = runner.control
 
     state, _ = _advance_steps(integ, state, 1, control)  # compilation
+    builds0 = scene.contact.feature_list.builds
     t0 = time.perf_counter()
     state, stats = _advance_steps(integ, state, steps, control)
     wall = time.perf_counter() - t0
+    builds = scene.contact.feature_list.builds - builds0
     G, threads = scene.n_grains, numba.get_num_threads()
     x, t = state.x, state.t
     contact = scene.contact
@@ -79,8 +82,10 @@ def measure(cfg: dict, pack, steps: int) -> dict:
     repeats = max(20, steps // 10)
     pieces = {
         "search (broad phase, Verlet skin)": _per_call(lambda: contact.search(x, t, margin=integ.skin), repeats),
-        "narrow phase (find_contacts)": _per_call(
+        "narrow phase, full search (find_contacts)": _per_call(
             lambda: find_contacts(x_all, candidates, contact.topology, gbar), repeats),
+        "narrow phase, feature list kept (what a step at rest costs)": _per_call(
+            lambda: contact.feature_list.find(x_all, candidates, contact.topology, gbar), repeats),
         "contact forces (evaluate, narrow phase included)": _per_call(
             lambda: contact.evaluate(x, t, candidates, state.history, v=state.v), repeats),
         "free rotation": _per_call(lambda: free_rotation(s["rotation"], s["momentum"], b.moments, 1e-6), repeats),
@@ -100,6 +105,8 @@ def measure(cfg: dict, pack, steps: int) -> dict:
         "grain_steps_per_s": G * stats.accepted / wall,
         "grain_steps_per_cpu_s": G * stats.accepted / (wall * threads),
         "contact_pairs": int(len(ints)),
+        "candidate_grain_pairs": int(len(candidates)),
+        "feature_list_builds_per_step": builds / stats.accepted,
         "pieces_ms": {k: 1e3 * v for k, v in pieces.items()},
     }
 
@@ -152,6 +159,8 @@ def main(argv=None) -> None:
     print(f"  {r['grain_steps_per_s']:,.0f} grain-steps/s, {r['grain_steps_per_cpu_s']:,.0f} per CPU-second "
           f"({r['grain_steps_per_cpu_s'] / 1600:.0f}-{r['grain_steps_per_cpu_s'] / 600:.0f}x the 600-1,600 of "
           "rigid polyhedra elsewhere, issue 16)")  # fmt: skip
+    print(f"  feature list: {r['feature_list_builds_per_step']:.1f} grain-pair lists rebuilt per step of "
+          f"{r['candidate_grain_pairs']} candidate grain pairs")  # fmt: skip
     print("  pieces, ms per call at the end state:")
     for k, v in r["pieces_ms"].items():
         print(f"    {v:7.3f}  {k}")

@@ -68,6 +68,22 @@ def test_the_list_finds_the_searchs_records_along_a_trajectory(pack):
     assert kept_pairs > 0.5 * calls  # and most were kept
 
 
+def test_a_pack_falling_as_one_keeps_its_lists(pack):
+    """Translated as a whole by 50 gbar in 100 calls, each grain jittered by 1e-3 gbar: no list is
+    rebuilt after the first (distances do not change under a common shift), the records stay the
+    search's."""
+    x0, topo, vptr = pack
+    rng = np.random.default_rng(2)
+    fl = FeatureList(2 * GBAR)
+    candidates = candidate_pairs(x0, vptr, 5 * GBAR)
+    fl.find(x0, candidates, topo, GBAR)
+    first = fl.builds
+    for k in range(1, 101):
+        x = x0 + [0.0, 0.1 * k * GBAR, -0.5 * k * GBAR] + rng.normal(scale=1e-3 * GBAR, size=x0.shape)
+        assert _same(fl.find(x, candidates, topo, GBAR), find_contacts(x, candidates, topo, GBAR)), f"call {k}"
+    assert first == len(candidates) and fl.builds == first
+
+
 def test_a_jump_rebuilds_every_list(pack):
     x0, topo, vptr = pack
     fl = FeatureList(2 * GBAR)

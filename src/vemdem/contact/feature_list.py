@@ -11,12 +11,15 @@ each by ascending feature indices), and re-runs on them the search's own exact t
 in its order, bit for bit (tests/test_feature_list.py), as long as the list holds every feature
 pair now within gbar:
 
-- every point of a feature is a convex combination of its nodes, so while each node of A moved at
-  most t_A and each node of B at most t_B, the distance of any two features changed by at most
-  t_A + t_B. A feature pair within gbar now was within gbar + t_A + t_B when the list was built;
-- t_g is bounded by the body's travel: the sum, over the calls since, of its nodes' largest
-  displacement from one call to the next (any sequence of positions: Newton iterates and
-  rejected steps included). A grain pair's list is rebuilt once t_A + t_B exceeds the skin;
+- every point of a feature is a convex combination of its nodes, and distances do not change
+  when both bodies are shifted alike. So if every node of A moved by at most m_A and every node
+  of B by at most m_B from a common translation u, the distance of any two of their features
+  changed by at most m_A + m_B. Per call, with each body's shift (its nodes' mean displacement)
+  and spread (the largest distance of a node's displacement from that shift), u the mean of the
+  two shifts: m_A + m_B = spread_A + spread_B + |shift_A - shift_B|;
+- these bounds add up over the calls since the grain pair's list was built (any sequence of
+  positions: Newton iterates and rejected steps included); the list is rebuilt once the sum
+  exceeds the skin. Grains that fall or flow together keep their lists;
 - the build keeps a feature pair when a lower bound of its distance is within reach: the boxes
   and the slab of the search, then the distance to the face's plane (vertex-face), to the edge's
   line (vertex-edge), between the two lines (edge-edge, when not near parallel) or between the
@@ -181,16 +184,38 @@ def _records(x, grain_pairs, ptr, entries, gbar, faces, edges, edge_faces, edge_
 
 
 @njit(cache=True)
-def _add_travel(x, x_last, vptr, travel):
-    """travel[g] += the largest displacement of body g's nodes since x_last; x_last <- x."""
+def _body_moves(x, x_last, vptr, shift, spread):
+    """Each body's move since x_last: shift[g] its nodes' mean displacement, spread[g] the largest
+    distance of a node's displacement from it (turning, deforming); x_last <- x."""
     for g in range(len(vptr) - 1):
+        n = vptr[g + 1] - vptr[g]
+        for a in range(3):
+            shift[g, a] = 0.0
+        for i in range(vptr[g], vptr[g + 1]):
+            for a in range(3):
+                shift[g, a] += (x[i, a] - x_last[i, a]) / n
         most = 0.0
         for i in range(vptr[g], vptr[g + 1]):
-            d = (x[i, 0] - x_last[i, 0]) ** 2 + (x[i, 1] - x_last[i, 1]) ** 2 + (x[i, 2] - x_last[i, 2]) ** 2
-            most = max(most, d)
+            d = 0.0
             for a in range(3):
+                r = x[i, a] - x_last[i, a] - shift[g, a]
+                d += r * r
                 x_last[i, a] = x[i, a]
-        travel[g] += np.sqrt(most)
+            most = max(most, d)
+        spread[g] = np.sqrt(most)
+
+
+@njit(cache=True)
+def _add_relative_moves(keys, n_bodies, shift, spread, used):
+    """used[k] += a bound on how much any distance between the two bodies of pair k changed: with u
+    the mean of their shifts, every node of A moved by at most spread_A + |shift_A - shift_B| / 2
+    from u, and the same for B (distances do not change under the common translation u)."""
+    for k in range(len(keys)):
+        A, B = keys[k] // n_bodies, keys[k] % n_bodies
+        d = 0.0
+        for a in range(3):
+            d += (shift[A, a] - shift[B, a]) ** 2
+        used[k] += spread[A] + spread[B] + np.sqrt(d)
 
 
 @njit(cache=True)
@@ -247,13 +272,11 @@ class FeatureList:
         if self._last is None or self._last.shape != x.shape or self._gbar != gbar:
             self._reset(x, n_bodies, gbar)
         else:
-            _add_travel(x, self._last, vptr, self._travel)
+            _body_moves(x, self._last, vptr, self._shift, self._spread)
+            _add_relative_moves(self._keys, n_bodies, self._shift, self._spread, self._used)
         keys = grain_pairs[:, 0] * n_bodies + grain_pairs[:, 1]
         slot = self._slots(keys)
-        A, B = grain_pairs[:, 0], grain_pairs[:, 1]
-        safe = np.maximum(slot, 0)
-        used = self._travel[A] - self._start[safe, 0] + self._travel[B] - self._start[safe, 1]
-        stale = np.flatnonzero((slot < 0) | (used > self.skin))
+        stale = np.flatnonzero((slot < 0) | (self._used[np.maximum(slot, 0)] > self.skin))
         if len(stale) or not np.array_equal(keys, self._keys):
             self._update(x, grain_pairs, keys, slot, stale, topo, gbar + self.skin)
         return self._records(x, grain_pairs, topo, gbar, capacity)
@@ -261,10 +284,11 @@ class FeatureList:
     def _reset(self, x, n_bodies, gbar):
         self._last = x.copy()
         self._gbar = gbar
-        self._travel = np.zeros(n_bodies)
-        self._keys = np.zeros(0, np.int64)  # grain pairs of the list, in their order
+        self._shift = np.zeros((n_bodies, 3))
+        self._spread = np.zeros(n_bodies)
+        self._keys = np.zeros(0, np.int64)  # grain pairs of the list (A n_bodies + B), in their order
         self._sorted = np.zeros(0, np.int64)  # argsort of _keys
-        self._start = np.zeros((1, 2))  # travel of each side when its list was built
+        self._used = np.zeros(1)  # each pair's bound on its bodies' relative move since its list was built
         self._ptr = np.zeros(1, np.int64)
         self._entries = np.zeros((0, 3), np.int64)
 
@@ -281,9 +305,9 @@ class FeatureList:
         stale_rank = np.full(len(keys), -1, np.int64)
         stale_rank[stale] = np.arange(len(stale))
         self._ptr, self._entries = _merge(self._ptr, self._entries, slot, built_ptr, built, stale_rank)
-        start = self._start[np.maximum(slot, 0)]
-        start[stale] = np.column_stack([self._travel[grain_pairs[stale, 0]], self._travel[grain_pairs[stale, 1]]])
-        self._start = start if len(start) else np.zeros((1, 2))
+        used = self._used[np.maximum(slot, 0)]
+        used[stale] = 0.0
+        self._used = used if len(used) else np.zeros(1)
         self._keys = keys.copy()
         self._sorted = np.argsort(keys, kind="stable")
         self.builds += len(stale)
