@@ -4,12 +4,13 @@ wall, and through whole explicit runs (the reference is pairs.find_contacts, the
 
 from pathlib import Path
 
+import ipctk
 import numpy as np
 import pytest
 
 from vemdem.config.build import scene_from, solver_options_from
 from vemdem.contact.broad import candidate_pairs
-from vemdem.contact.feature_list import FeatureList
+from vemdem.contact.feature_list import FeatureList, _line_gap, _plane_gap, _segments_gap
 from vemdem.contact.narrow import EDGE_EDGE, VERTEX_FACE
 from vemdem.contact.pairs import find_contacts
 from vemdem.contact.topology import build_topology
@@ -144,6 +145,35 @@ def test_new_positions_of_another_size_start_a_new_list(pack):
     small = build_topology(np.vstack([a.vertices, a.vertices + [0, 0, 1.02]]), [a.faces, a.faces], np.array([0, 8, 16]))
     x = np.vstack([a.vertices, a.vertices + [0, 0, 1.02]])
     assert _same(fl.find(x, np.array([[0, 1]]), small, 0.05), find_contacts(x, np.array([[0, 1]]), small, 0.05))
+
+
+def test_the_builds_distances_are_ipctks():
+    """The build's filters against ipctk: the segment distance equals its edge-edge distance (random
+    and crossing pairs; near parallel a lower bound within 1e-5), the plane and line distances are its point-plane and
+    point-line distances, at most the point-triangle and point-edge ones (lower bounds: no feature
+    pair within reach is left out)."""
+    rng = np.random.default_rng(3)
+    edges = np.array([[0, 1], [2, 3]])
+    faces = np.array([[0, 1, 2]])
+    for k in range(400):
+        x = rng.normal(size=(4, 3))
+        if k % 4 == 1:  # near parallel
+            x[3] = x[2] + (x[1] - x[0]) * rng.uniform(0.5, 2) + rng.normal(scale=1e-7, size=3)
+        if k % 4 == 2:  # crossing, closest points inside both
+            x[2:] = 0.5 * (x[0] + x[1]) + np.array([[-1.0], [1.0]]) * rng.normal(size=3) + [0, 0, 1e-3]
+        expected = np.sqrt(ipctk.edge_edge_distance(x[0], x[1], x[2], x[3]))
+        gap = _segments_gap(x, 0, 1, edges)
+        if k % 4 == 1:  # a lower bound there, within 2 L sin of the angle (about 1e-6 here)
+            assert expected - 1e-5 < gap <= expected * (1 + 1e-12)
+        else:
+            assert gap == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        p = np.vstack([x[:3], x[3:]])
+        plane = _plane_gap(p, 3, 0, faces)
+        assert plane == pytest.approx(np.sqrt(ipctk.point_plane_distance(p[3], p[0], p[1], p[2])), rel=1e-9)
+        assert plane <= np.sqrt(ipctk.point_triangle_distance(p[3], p[0], p[1], p[2])) * (1 + 1e-12)
+        line = _line_gap(x, 3, 0, edges)
+        assert line == pytest.approx(np.sqrt(ipctk.point_line_distance(x[3], x[0], x[1])), rel=1e-9)
+        assert line <= np.sqrt(ipctk.point_edge_distance(x[3], x[0], x[1])) * (1 + 1e-12)
 
 
 def test_a_skin_must_be_positive():

@@ -171,14 +171,20 @@ def feature_boxes(x, nodes):
     once per search, as the grains' boxes: the pre-tests compare boxes instead of re-reading nodes."""
     out = np.empty((len(nodes), 6))
     for k in prange(len(nodes)):
-        for a in range(3):
-            lo = hi = x[nodes[k, 0], a]
-            for j in range(1, nodes.shape[1]):
-                lo = min(lo, x[nodes[k, j], a])
-                hi = max(hi, x[nodes[k, j], a])
-            out[k, a] = lo
-            out[k, 3 + a] = hi
+        feature_box(x, nodes, k, out)
     return out
+
+
+@njit(cache=True)
+def feature_box(x, nodes, k, out):
+    """Row k of out: the box (lo, hi) of the nodes nodes[k]."""
+    for a in range(3):
+        lo = hi = x[nodes[k, 0], a]
+        for j in range(1, nodes.shape[1]):
+            lo = min(lo, x[nodes[k, j], a])
+            hi = max(hi, x[nodes[k, j], a])
+        out[k, a] = lo
+        out[k, 3 + a] = hi
 
 
 @njit(cache=True)
