@@ -15,9 +15,10 @@ Prints steps per second, grain-steps per second and per CPU-second (wall x numba
 grain pairs' feature lists (contact/feature_list.py) were rebuilt per step, and the pieces of a
 step, each timed on its own at the end state: the contact search (broad phase), the narrow phase
 (the full search `find_contacts`, and the feature list with every list kept), the contact
-forces, the rigid kinematics (free rotation, vertex placement and velocities) and the step limits. The reference point of issue 16: rigid polyhedra in
-other DEM codes cost about 0.3 CPU-s per step for a 515-grain dense pack (600-1,600 grain-steps per
-CPU-second). Nothing here asserts a timing.
+forces, the rigid kinematics (free rotation, vertex placement and velocities) and the step limits.
+The reference point of issue 16: rigid polyhedra in other DEM codes cost about 0.3 CPU-s per
+step for a 515-grain dense pack (600-1,600 grain-steps per CPU-second). Nothing here asserts a
+timing.
 """
 
 from __future__ import annotations
