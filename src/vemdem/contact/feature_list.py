@@ -262,33 +262,19 @@ def _feature_boxes_of(x, nodes, body_ptr, bodies):
 
 
 @njit(cache=True)
-def _gather(out, counts, cap):
-    """(ptr, entries): the first counts[j] rows of every slot j of out, in order."""
-    ptr = np.zeros(len(counts) + 1, dtype=np.int64)
-    for j in range(len(counts)):
-        ptr[j + 1] = ptr[j] + counts[j]
-    entries = np.empty((ptr[-1], 3), dtype=np.int64)
-    for j in range(len(counts)):
-        for r in range(counts[j]):
-            for c in range(3):
-                entries[ptr[j] + r, c] = out[j * cap + r, c]
-    return ptr, entries
-
-
-@njit(cache=True)
-def _merge(old_ptr, old_entries, slot, built_ptr, built, stale_rank):
+def _merge(old_ptr, old_entries, slot, built, built_counts, cap, stale_rank):
     """(ptr, entries) for the current grain pairs: a kept pair's entries from the old list, a
-    rebuilt one's (stale_rank[k] >= 0) from the build."""
+    rebuilt one's (stale_rank[k] = j >= 0) from slot j of the build (rows j cap onwards)."""
     m = len(slot)
     ptr = np.zeros(m + 1, dtype=np.int64)
     for k in range(m):
         j = stale_rank[k]
-        size = built_ptr[j + 1] - built_ptr[j] if j >= 0 else old_ptr[slot[k] + 1] - old_ptr[slot[k]]
+        size = built_counts[j] if j >= 0 else old_ptr[slot[k] + 1] - old_ptr[slot[k]]
         ptr[k + 1] = ptr[k] + size
     entries = np.empty((ptr[m], 3), dtype=np.int64)
     for k in range(m):
         j = stale_rank[k]
-        src, start = (built, built_ptr[j]) if j >= 0 else (old_entries, old_ptr[slot[k]])
+        src, start = (built, j * cap) if j >= 0 else (old_entries, old_ptr[slot[k]])
         for r in range(ptr[k + 1] - ptr[k]):
             for c in range(3):
                 entries[ptr[k] + r, c] = src[start + r, c]
@@ -344,10 +330,10 @@ class FeatureList:
         return np.where(ordered[pos] == keys, self._sorted[pos], -1)
 
     def _update(self, x, grain_pairs, keys, slot, stale, topo, reach):
-        built_ptr, built = self._build(x, grain_pairs, stale, topo, reach)
+        built, built_counts, cap = self._build(x, grain_pairs, stale, topo, reach)
         stale_rank = np.full(len(keys), -1, np.int64)
         stale_rank[stale] = np.arange(len(stale))
-        self._ptr, self._entries = _merge(self._ptr, self._entries, slot, built_ptr, built, stale_rank)
+        self._ptr, self._entries = _merge(self._ptr, self._entries, slot, built, built_counts, cap, stale_rank)
         used = self._used[np.maximum(slot, 0)]
         used[stale] = 0.0
         self._used = used if len(used) else np.zeros(1)
@@ -356,8 +342,9 @@ class FeatureList:
         self.builds += len(stale)
 
     def _build(self, x, grain_pairs, stale, topo, reach, capacity=64):
+        """(out, counts, capacity): the entries of stale pair j in rows j capacity onwards of out."""
         if len(stale) == 0:
-            return np.zeros(1, np.int64), np.zeros((0, 3), np.int64)
+            return np.zeros((0, 3), np.int64), np.zeros(0, np.int64), capacity
         glo, ghi = grain_boxes(x, topo.grain_vertex_ptr, 0.0)
         bodies = np.unique(grain_pairs[stale])  # only their features' boxes are read
         fbox = _feature_boxes_of(x, topo.faces, topo.grain_face_ptr, bodies)
@@ -371,7 +358,7 @@ class FeatureList:
             if counts.max() <= capacity:
                 break
             capacity = int(counts.max())
-        return _gather(out, counts, capacity)
+        return out, counts, capacity
 
     def _records(self, x, grain_pairs, topo, gbar, capacity):
         while True:
