@@ -19,7 +19,7 @@ from vemdem.io.state import load_state
 from vemdem.scenarios.pile_collapse import standing_walls
 from vemdem.scenarios.registry import checked_config
 from vemdem.solver.api import make_integrator
-from vemdem.solver.explicit import advance_explicit
+from vemdem.solver.state import RunStats
 
 PACK = Path(__file__).parent / "data" / "pack30_mu015.npz"
 GBAR = 1.5e-5  # the law's activation gap for these 1.45 mm grains, about
@@ -181,23 +181,24 @@ def test_a_skin_must_be_positive():
         FeatureList(0.0)
 
 
-@pytest.mark.parametrize("grains", ["rigid", "flexible"])
-def test_explicit_runs_are_the_same_with_and_without_the_list(grains):
-    """The 30-grain pack's walls opened, 10 ms of explicit steps (rigid grains at the real density,
-    flexible ones with mass scaling 1e6): the same state to the bit with the list as with the full search."""
-    scaling = 1.0 if grains == "rigid" else 1e6
+@pytest.mark.parametrize("grains, integrator", [("rigid", "explicit"), ("flexible", "explicit"), ("flexible", "implicit")])
+def test_runs_are_the_same_with_and_without_the_list(grains, integrator):
+    """The 30-grain pack's walls opened, 10 ms of steps (rigid grains at the real density, flexible
+    ones explicit with mass scaling 1e6, implicit at the real density): the same state to the bit
+    with the list as with the full search."""
+    scaling = 1e6 if (grains, integrator) == ("flexible", "explicit") else 1.0
     cfg, _ = checked_config({"scenario": "pile_collapse", "initial_state": str(PACK), "model": {"grains": grains},
-                             "solver": {"integrator": "explicit", "mass_scaling": scaling}})  # fmt: skip
+                             "solver": {"integrator": integrator, "mass_scaling": scaling}})  # fmt: skip
     s = load_state(PACK)
     ends = []
     for keep in (True, False):
         scene = scene_from(s.grains, cfg, standing_walls(s.meta, "corner"))
         runner = make_integrator(solver_options_from(cfg), scene)
-        assert scene.contact.feature_list is not None  # the explicit integrators keep one
+        assert scene.contact.feature_list is not None  # every integrator keeps one
         if not keep:
             scene.contact.feature_list = None
         state = runner.initial_state(s.x, s.v)
-        state, stats = advance_explicit(runner.integrator, state, 0.01, runner.control)
+        state, stats = runner.advance(state, 0.01, None, RunStats())
         ends.append((state, stats.accepted))
     (a, steps), (b, _) = ends
     assert steps > 50 and np.abs(a.x - s.x).max() > GBAR  # the grains moved
