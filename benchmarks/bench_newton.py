@@ -145,14 +145,14 @@ def measure(scene, state, dt, solver_name, repeat):
     a1, a4 = 1 / (BETA * dt * dt), GAMMA / (BETA * dt)
     contact = scene.contact
     cand = contact.search(state.x, state.t)
-    t_el, el = best(lambda: scene.bodies.evaluate(state.x, tangent=True), repeat)
+    t_el, el = best(lambda: scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1), repeat)
     t_c, cr = best(lambda: contact.evaluate(state.x, state.t, cand, state.history, v=state.v, a4=a4, tangent=True),
                    repeat)  # fmt: skip
 
     def assemble():
-        ev = scene.bodies.evaluate(state.x, tangent=True)
+        ev = scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1)
         t0 = time.perf_counter()
-        blocks, coupling = newton_blocks(scene, ev, cr, a1)
+        blocks, coupling = newton_blocks(scene, ev, cr)
         return time.perf_counter() - t0, NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling,
                                                       state.x)  # fmt: skip
 

@@ -48,8 +48,8 @@ def real_system(shift=3.3e8):
     x = scene.bodies.reference * np.array([1.0, 1.0, 1.0 - 0.1 * gbar / 3e-3])
     v = np.random.default_rng(1).normal(scale=1e-3, size=x.shape)
     cr = scene.contact.evaluate(x, 0.0, scene.contact.search(x, 0.0), v=v, a4=2e3, tangent=True)
-    el = scene.bodies.evaluate(x, tangent=True)
-    blocks, coupling = newton_blocks(scene, el, cr, shift)
+    el = scene.bodies.evaluate(x, tangent=True, mass_shift=shift)
+    blocks, coupling = newton_blocks(scene, el, cr)
     return NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x)
 
 

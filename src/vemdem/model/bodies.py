@@ -30,7 +30,7 @@ from ..vem.element import (
     projected_cauchy_stress,
     tangent_matrix,
 )
-from ..vem.mass import GrainMass, add_mass_to_blocks, build_mass
+from ..vem.mass import GrainMass, build_mass
 from ..vem.material import Material
 
 RIGID_MODES = 6  # a free grain's zero eigenvalues: three translations, three rotations
@@ -62,9 +62,8 @@ class BodyModel(Protocol):
     @property
     def n_vertices(self) -> int: ...
 
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False) -> Evaluation: ...
-
-    def add_mass(self, blocks: np.ndarray, shift: float) -> None: ...
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
+        ...
 
     def mass_matrix(self) -> sp.csr_matrix: ...
 
@@ -101,15 +100,11 @@ class VemBodies:
         return self.elements.n_vertices
 
     # ------------------------------------------------------------------ mechanics
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False) -> Evaluation:
-        """Strain energy per grain, internal force dW/dx and the flat dense tangent blocks."""
-        return evaluate(self.elements, x, force=force, tangent=tangent)
-
-    def add_mass(self, blocks: np.ndarray, shift: float) -> None:
-        """blocks += shift M (M the consistent mass, scalar n x n per grain times I_3), in place:
-        the Newmark matrix a1 M + K_int without a sparse sum."""
-        add_mass_to_blocks(blocks, self.elements.block_ptr, self.mass.blocks, self.mass.block_ptr,
-                           self.vertex_ptr, shift)  # fmt: skip
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
+        """Strain energy per grain, internal force dW/dx and the flat dense tangent blocks, of
+        K_int + mass_shift M (M the consistent mass, scalar n x n per grain times I_3): the Newmark
+        matrix a1 M + K_int without a sparse sum."""
+        return evaluate(self.elements, x, force=force, tangent=tangent, mass=self.mass, mass_shift=mass_shift)
 
     def tangent_matrix(self, blocks: np.ndarray) -> sp.csr_matrix:
         return tangent_matrix(self.elements, blocks)

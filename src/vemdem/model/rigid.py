@@ -112,13 +112,12 @@ class RigidBodies:
         return place_vertices(centre, rotation, self.body, self.vertex_grain)
 
     # ------------------------------------------------------------------ the BodyModel protocol
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False) -> Evaluation:
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
         """No strain energy, no internal force: the grains do not deform."""
+        if tangent and mass_shift != 0.0:
+            raise NotImplementedError("rigid grains have no vertex mass blocks: solver/rigid_implicit.py works on six dofs")
         G = self.n_bodies
         return Evaluation(np.zeros(G), np.zeros_like(x) if force else None, np.zeros(36 * G) if tangent else None)
-
-    def add_mass(self, blocks: np.ndarray, shift: float) -> None:
-        raise NotImplementedError("rigid grains have no vertex mass blocks: solver/rigid_implicit.py works on six dofs")
 
     def mass_matrix(self) -> sp.csr_matrix:
         """The consistent VEM mass on vertex velocities: exact for rigid motions (1/2 v.M v is the

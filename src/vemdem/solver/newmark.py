@@ -177,13 +177,12 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
     return alpha
 
 
-def newton_blocks(scene: Scene, el, cr, mass_shift: float):
-    """The Newton matrix K = mass_shift M + K_int + K_contact as the bodies' dense blocks (element
-    tangent, mass and the contact terms within a grain, assembled in place in compiled kernels) and
-    one sparse coupling matrix (contact terms between grains): no sparse sums (issue 14)."""
+def newton_blocks(scene: Scene, el, cr):
+    """The Newton matrix K = a1 M + K_int + K_contact as the bodies' dense blocks (`el`, evaluated
+    with mass_shift a1, plus the contact terms within a grain, added in place by a compiled kernel)
+    and one sparse coupling matrix (contact terms between grains): no sparse sums (issue 14)."""
     blocks = el.blocks  # freshly allocated by evaluate: updated in place
     bodies = scene.bodies
-    bodies.add_mass(blocks, mass_shift)
     coupling = cr.add_to_blocks(scene.contact.topology.vertex_grain, bodies.vertex_ptr, bodies.block_ptr, blocks)
     return blocks, coupling
 
@@ -327,7 +326,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         acc = a1 * du - a2 * state.v - a3 * state.a
         vel = a4 * du + a5 * state.v + a6 * state.a
         try:
-            el = scene.bodies.evaluate(x, tangent=True)
+            el = scene.bodies.evaluate(x, tangent=True, mass_shift=a1 + params.mass_damping * a4)
             cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
@@ -340,7 +339,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             raise StepRejected("non-finite residual")
         r_norm = np.abs(R).max()
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
-        blocks, coupling = newton_blocks(scene, el, cr, a1 + params.mass_damping * a4)
+        blocks, coupling = newton_blocks(scene, el, cr)
         linear.factor(NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x))
         drive = 0.0 if at_end else _wall_drive(contact, x, tw, t1, candidates, state.history, vel, a4).ravel()
         eta = _forcing(params, eta, corrections[-1][1] if corrections else None, r_norm)

@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit, prange
 
 from ..geometry.polyhedron import Polyhedron
 from .element import GrainElements, tet_gradients
@@ -74,20 +73,6 @@ def block_diagonal_mass(blocks: np.ndarray, block_ptr: np.ndarray, vertex_ptr: n
 
     def total(self) -> float:
         return float(self.lumped.sum())
-
-
-@njit(parallel=True, cache=True)
-def add_mass_to_blocks(blocks, block_ptr, mass_blocks, mass_ptr, vertex_ptr, shift):
-    """blocks[g] += shift (M_g (x) I_3) for every grain, in place: the dense 3n x 3n tangent block
-    (dof 3 v + i, row-major) gets the scalar n x n mass block on its three diagonal sub-lattices."""
-    for g in prange(len(vertex_ptr) - 1):
-        n = vertex_ptr[g + 1] - vertex_ptr[g]
-        b0, m0, n3 = block_ptr[g], mass_ptr[g], 3 * n
-        for v in range(n):
-            for w in range(n):
-                m = shift * mass_blocks[m0 + v * n + w]
-                for i in range(3):
-                    blocks[b0 + (3 * v + i) * n3 + 3 * w + i] += m
 
 
 def projection_mass(grain: Polyhedron, density: float) -> np.ndarray:
