@@ -181,6 +181,11 @@ def test_inverted_grain_is_reported_not_nan():
         evaluate(el, x)
     ev = evaluate(el, x, raise_on_inversion=False)
     assert ev.energy[0] == np.inf
+    # its tangent block is zeros, not the uninitialised memory the blocks are allocated with (here
+    # most likely the freed blocks of the evaluation before, which hold a tangent)
+    for _ in range(3):
+        assert np.abs(evaluate(el, el.reference, tangent=True).blocks).max() > 0.0
+        assert np.all(evaluate(el, x, tangent=True, raise_on_inversion=False).blocks == 0.0)
 
 
 def test_material_constants():

@@ -239,8 +239,9 @@ def _evaluate_grains(
                                     Ka[3 * b + j, 3 * a + i] += kab[i, j]
         energy[g] = e
         if inverted[g]:
-            if want_tangent:
-                blocks[block_ptr[g] : block_ptr[g + 1]] = 0.0
+            if want_tangent:  # not left as np.empty's garbage (an element loop: numba compiles a
+                for k in range(block_ptr[g], block_ptr[g + 1]):  # slice assignment's error path for seconds)
+                    blocks[k] = 0.0
             continue
         if want_force:
             for v in range(nv):
