@@ -171,6 +171,6 @@ def test_the_predictor_key_reaches_newton(table, expected):
     raw = tomllib.loads(files("vemdem.examples").joinpath("drop.toml").read_text())
     raw["solver"] = {"integrator": "implicit", **table}
     options = solver_options_from(checked_config(raw)[0])
-    assert ImplicitNewmark(None, options).params.predictor == expected  # the scene plays no part here
+    assert ImplicitNewmark(twelve_grain_drop(), options).params.predictor == expected
     with pytest.raises(ConfigError, match="predictor"):
         checked_config({**raw, "solver": {"predictor": "guess"}})
