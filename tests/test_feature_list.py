@@ -181,7 +181,8 @@ def test_a_skin_must_be_positive():
         FeatureList(0.0)
 
 
-@pytest.mark.parametrize("grains, integrator", [("rigid", "explicit"), ("flexible", "explicit"), ("flexible", "implicit")])
+@pytest.mark.parametrize("grains, integrator",
+                         [("rigid", "explicit"), ("flexible", "explicit"), ("flexible", "implicit")])
 def test_runs_are_the_same_with_and_without_the_list(grains, integrator):
     """The 30-grain pack's walls opened, 10 ms of steps (rigid grains at the real density, flexible
     ones explicit with mass scaling 1e6, implicit at the real density): the same state to the bit

@@ -115,7 +115,8 @@ class RigidBodies:
     def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
         """No strain energy, no internal force: the grains do not deform."""
         if tangent and mass_shift != 0.0:
-            raise NotImplementedError("rigid grains have no vertex mass blocks: solver/rigid_implicit.py works on six dofs")
+            raise NotImplementedError("rigid grains have no vertex mass blocks: "
+                                      "solver/rigid_implicit.py works on six dofs")
         G = self.n_bodies
         return Evaluation(np.zeros(G), np.zeros_like(x) if force else None, np.zeros(36 * G) if tangent else None)
 

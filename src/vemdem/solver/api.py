@@ -13,7 +13,8 @@ from typing import Protocol
 import numpy as np
 
 from ..model.scene import Scene
-from .explicit import FEATURE_SKIN_GAPS, ExplicitIntegrator, ExplicitParameters, advance_explicit, explicit_initial_state
+from .explicit import (FEATURE_SKIN_GAPS, ExplicitIntegrator, ExplicitParameters, advance_explicit,
+                       explicit_initial_state)
 from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
 from .newmark import PREDICTORS, NewmarkParameters, advance, initial_state
