@@ -63,6 +63,28 @@ def test_stick_below_mu_s_then_slip_at_mu_d_and_back():
     assert not res.trial_history.stick.any() and F[0] == pytest.approx(-0.4 * FN, rel=1e-9)
 
 
+def test_slipping_pairs_are_judged_by_mu_d():
+    """`slipping` (Newton's broken stick-slip cycles, solver.newmark.NewmarkParameters.break_stick_cycles):
+    a sticking pair whose trial force lies between mu_d and mu_s F_N sticks when judged by mu_s and
+    slides at mu_d F_N when listed; pairs not listed are judged as before."""
+    c, model = cube_on_floor()
+    fn_pair = normal_force(GAP, LAW.packed())[0]
+    FN = 4 * fn_pair
+    step = 0.45 * fn_pair / EPS_T  # each pair's trial force 0.45 F_N: between mu_d (0.4) and mu_s (0.5)
+    x0 = c.vertices.copy()
+    _, res = tangential_force(model, x0, ContactHistory.empty())  # the pairs start, sticking
+    history = res.trial_history
+    x = x0 + [step, 0, 0]
+    F, res = tangential_force(model, x, history)
+    assert res.trial_history.stick.all() and F[0] == pytest.approx(-0.45 * FN, rel=1e-9)
+    listed = history.keys[:2]  # two of the four pairs
+    res = model.evaluate(x, 0.0, model.search(x, 0.0), history, slipping=listed)
+    stick = dict(zip(res.trial_history.keys.tolist(), res.trial_history.stick.tolist()))
+    assert [stick[k] for k in history.keys.tolist()] == [False, False, True, True]
+    F = -res.force.sum(axis=0)
+    assert F[0] == pytest.approx(-(2 * 0.4 + 2 * 0.45) * fn_pair, rel=1e-9)
+
+
 def test_history_is_reset_when_the_pair_ends():
     c, model = cube_on_floor()
     x0 = c.vertices.copy()

@@ -202,3 +202,24 @@ def test_the_solver_defaults_are_one_set():
     assert set(defaults) <= set(SOLVER)
     for key, value in defaults.items():
         assert SOLVER[key].default == value, key
+
+
+def test_pairs_that_flip_between_stick_and_slip_twice_are_broken():
+    """newmark._StickFlips: a pair whose stick flag changed at two iterations (not necessarily
+    consecutive) is listed as broken; one change, a pair that joins late, or a pair that leaves is not."""
+    from vemdem.contact.model import ContactHistory
+    from vemdem.solver.newmark import _StickFlips
+
+    def h(keys, stick):
+        return ContactHistory(np.array(keys, np.int64), np.zeros((len(keys), 2)), np.zeros((len(keys), 3)),
+                              np.array(stick, bool))  # fmt: skip
+
+    flips = _StickFlips()
+    flips.update(h([1, 2, 3, 4], [1, 1, 1, 1]))
+    flips.update(h([1, 2, 3, 4], [0, 0, 1, 1]))  # 1 and 2 flip once
+    flips.update(h([1, 2, 3, 5], [0, 1, 0, 0]))  # 2 flips back (twice), 3 once, 4 leaves, 5 joins
+    assert flips.broken.tolist() == [2]
+    flips.update(h([1, 2, 3, 5], [0, 1, 0, 1]))  # 5 flips once
+    flips.update(h([1, 2, 3, 5], [1, 1, 0, 1]))  # 1's second flip, two iterations after its first
+    assert flips.broken.tolist() == [1, 2]
+    assert flips.once.tolist() == [1, 2, 3, 5]

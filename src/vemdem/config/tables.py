@@ -155,6 +155,12 @@ SOLVER = {
             "iteration is kept in the set for the rest of the step, or held out of it where another record "
             "carries its touching spot (docs/dynamics.md; without it a settling 110-grain pack stalled at 1e-7 s steps)",
     ),
+    "break_stick_cycles": Field(
+        bool, True,
+        doc="implicit, flexible grains: a pair that Newton flips between stick and slip twice in a step is judged "
+            "by mu_d for the rest of it, as a pair whose static friction broke (docs/dynamics.md; without it a "
+            "single such pair rejected the 515-grain implicit pack's steps down to 8e-7 s)",
+    ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
     ),

@@ -324,11 +324,15 @@ class ContactModel:
         return evaluate_contacts(x_all, ints, floats, self.law_params, len(x_all), False).total_energy
 
     def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
-                 tangent: bool = False, frozen: FrozenPairs | None = None) -> ContactResult:  # fmt: skip
+                 tangent: bool = False, frozen: FrozenPairs | None = None,
+                 slipping: np.ndarray | None = None) -> ContactResult:  # fmt: skip
         """Contact energy, residual (dPhi/dx + dissipative terms), tangent and wall reactions.
 
         v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics.
-        frozen: records kept whether or not the narrow phase finds them now (Newton's cycling pairs)."""
+        frozen: records kept whether or not the narrow phase finds them now (Newton's cycling pairs).
+        slipping: sorted pair keys whose static friction broke in this step (Newton's stick-slip
+        cycles, solver.newmark.NewmarkParameters.break_stick_cycles): judged as pairs that slipped
+        at the last step, by mu_d."""
         x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen, self.law.activation_gap)
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
@@ -340,6 +344,8 @@ class ContactModel:
         keys = pair_keys(ints)
         history = history or ContactHistory.empty()
         found, c_prev, gt_prev, stick_prev = history.lookup(keys)
+        if slipping is not None and len(slipping):
+            stick_prev &= ~np.isin(keys, slipping, assume_unique=True)
         stick_now, gt_now = stick_prev.copy(), np.zeros((len(ints), 3))
         power = 0.0
         dissipative = np.zeros((self.n_vertices, 3))

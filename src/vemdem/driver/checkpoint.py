@@ -60,7 +60,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              krylov=stats.krylov_iterations, frame=frame, fingerprint=identity.fingerprint,
              choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
-             frozen_pair_steps=stats.frozen_pair_steps, **books,
+             frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps, **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -87,6 +87,8 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
                 stats.energy_gains = int(d["energy_gains"])
             if "frozen_pair_steps" in d.files:  # checkpoints before session 14 have none
                 stats.frozen_pair_steps = int(d["frozen_pair_steps"])
+            if "stick_break_steps" in d.files:  # checkpoints before session 30 have none
+                stats.stick_break_steps = int(d["stick_break_steps"])
             frame = int(d["frame"])
     except CheckpointError:
         raise

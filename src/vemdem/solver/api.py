@@ -39,6 +39,7 @@ class SolverOptions:
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
     grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
     freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
+    break_stick_cycles: bool = True  # implicit flexible: pairs Newton flips between stick and slip twice go on at mu_d
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -82,7 +83,8 @@ class ImplicitNewmark:
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
                                         mass_damping=options.mass_damping, predictor=options.predictor,
                                         linear=make_linear_solver(options.linear),
-                                        freeze_cycles=options.freeze_cycles)  # fmt: skip
+                                        freeze_cycles=options.freeze_cycles,
+                                        break_stick_cycles=options.break_stick_cycles)  # fmt: skip
         # Newton's iterates move grains a fraction of a gap between narrow phases (one per iteration):
         # on the 515-grain collapse the list takes the narrow phase from 23 to 8.5 ms per Newton
         # iteration, the same records (docs/contact.md)

@@ -87,6 +87,14 @@ class NewmarkParameters:
     # an edge-edge record at its edge's end beside its end vertex's vertex-face record doubled that
     # spot's force at every other iterate and stalled a settling 110-grain pack at steps of 1e-7 s.
     freeze_cycles: bool = True
+    # A pair that sticks at the step's start is judged by mu_s, and its force drops from mu_s F_N to
+    # mu_d F_N where the trial force passes mu_s F_N. Where the drop pulls the trial force back below
+    # mu_s F_N the law has no root: Newton flips the pair between stick and slip every iterate or two
+    # until its 15 iterations run out, and halving the step does not remove a jump of the force
+    # (the 515-grain implicit pack: one pair flipping, rejected 5 times in a row down to 8e-7 s).
+    # With break_stick_cycles a pair that has flipped twice in a step is held to mu_d for the rest of
+    # it: its static friction broke, and the pair goes on as one that slid (continuous at mu_d F_N).
+    break_stick_cycles: bool = True
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
@@ -319,6 +327,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     full_before, dx_before = False, np.inf
     corrections = []
     frozen, key_trail = None, []
+    flips = _StickFlips() if params.break_stick_cycles else None
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
     for it in range(1, params.max_iterations + 1):
@@ -327,11 +336,14 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         vel = a4 * du + a5 * state.v + a6 * state.a
         try:
             el = scene.bodies.evaluate(x, tangent=True, mass_shift=a1 + params.mass_damping * a4)
-            cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen)
+            cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen,
+                                  slipping=None if flips is None else flips.broken)  # fmt: skip
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
         if params.freeze_cycles and tw == t1:
             frozen = _freeze_cycling(key_trail, cr.ints, cr.floats, frozen)
+        if flips is not None:
+            flips.update(cr.trial_history)
         inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
         at_end = tw == t1
@@ -398,7 +410,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     vel = a4 * du + a5 * state.v + a6 * state.a
     try:
         el = scene.bodies.evaluate(x)
-        cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4)
+        cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4,
+                              slipping=None if flips is None else flips.broken)  # fmt: skip
     except (InvertedElementError, PenetrationError) as exc:
         raise StepRejected(str(exc)) from None
     missed = missed_pairs(contact, x, t1, candidates)
@@ -407,8 +420,30 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
     info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
-                    0 if frozen is None else len(frozen.keys))  # fmt: skip
+                    0 if frozen is None else len(frozen.keys), 0 if flips is None else len(flips.broken))  # fmt: skip
     return new, info
+
+
+class _StickFlips:
+    """The pairs whose stick flag changed between Newton iterates, once (`once`) and twice or more
+    (`broken`: held to mu_d for the rest of the step, NewmarkParameters.break_stick_cycles); sorted
+    pair keys."""
+
+    def __init__(self):
+        self.keys = self.stick = None
+        self.once = np.zeros(0, np.int64)
+        self.broken = np.zeros(0, np.int64)
+
+    def update(self, history) -> None:
+        if self.keys is not None:
+            _, a, b = np.intersect1d(self.keys, history.keys, assume_unique=True, return_indices=True)
+            flipped = self.keys[a[self.stick[a] != history.stick[b]]]
+            if len(flipped):
+                again = np.intersect1d(flipped, self.once, assume_unique=True)
+                self.once = np.union1d(self.once, flipped)
+                if len(again):
+                    self.broken = np.union1d(self.broken, again)
+        self.keys, self.stick = history.keys, history.stick
 
 
 def _forcing(params: NewmarkParameters, eta: float, r_before: float | None, r_now: float) -> float:
@@ -562,6 +597,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         stats.newton_iterations += info.iterations
         stats.krylov_iterations += info.krylov_iterations
         stats.frozen_pair_steps += info.frozen_pairs > 0
+        stats.stick_break_steps += info.broken_pairs > 0
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)

@@ -52,6 +52,7 @@ class StepInfo:
     contact: object = None  # the ContactResult at the accepted state (frames write it)
     krylov_iterations: int = 0  # linear-solver iterations of the step (iterative solvers)
     frozen_pairs: int = 0  # implicit: pairs Newton kept in its set for cycling (NewmarkParameters.freeze_cycles)
+    broken_pairs: int = 0  # implicit: pairs judged by mu_d after stick-slip cycles (NewmarkParameters.break_stick_cycles)
 
 
 @dataclass
@@ -82,6 +83,7 @@ class RunStats:
     last_rejection: str = ""
     energy_gains: int = 0  # implicit: steps accepted although the energy grew (below 1e-3 dt_max, or not shrunk by halving)
     frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs kept (freeze_cycles)
+    stick_break_steps: int = 0  # implicit: steps with pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
     def reject(self, exc: BaseException) -> None:
