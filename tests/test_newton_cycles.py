@@ -204,9 +204,10 @@ def test_the_solver_defaults_are_one_set():
         assert SOLVER[key].default == value, key
 
 
-def test_pairs_that_flip_between_stick_and_slip_twice_are_broken():
-    """newmark._StickFlips: a pair whose stick flag changed at two iterations (not necessarily
-    consecutive) is listed as broken; one change, a pair that joins late, or a pair that leaves is not."""
+def test_pairs_that_flip_between_stick_and_slip_three_times_are_broken():
+    """newmark._StickFlips: a pair whose stick flag changed at three iterations (not necessarily
+    consecutive) is listed as broken; the change from the first iterate (the predictor) to the second
+    is not counted; one change, a pair that joins late, or a pair that leaves is not listed."""
     from vemdem.contact.model import ContactHistory
     from vemdem.solver.newmark import _StickFlips
 
@@ -215,11 +216,14 @@ def test_pairs_that_flip_between_stick_and_slip_twice_are_broken():
                               np.array(stick, bool))  # fmt: skip
 
     flips = _StickFlips()
+    assert flips.times == 3 and flips.skip_first
     flips.update(h([1, 2, 3, 4], [1, 1, 1, 1]))
-    flips.update(h([1, 2, 3, 4], [0, 0, 1, 1]))  # 1 and 2 flip once
-    flips.update(h([1, 2, 3, 5], [0, 1, 0, 0]))  # 2 flips back (twice), 3 once, 4 leaves, 5 joins
+    flips.update(h([1, 2, 3, 4], [0, 1, 1, 1]))  # 1 changes at the first update: the predictor's miss
+    flips.update(h([1, 2, 3, 4], [1, 0, 1, 1]))  # 1 and 2 change, counted once each
+    flips.update(h([1, 2, 3, 5], [1, 1, 0, 0]))  # 2 changes back (twice), 3 once, 4 leaves, 5 joins
+    assert flips.broken.tolist() == []
+    flips.update(h([1, 2, 3, 5], [1, 0, 0, 1]))  # 2's third change; 5 once
     assert flips.broken.tolist() == [2]
-    flips.update(h([1, 2, 3, 5], [0, 1, 0, 1]))  # 5 flips once
-    flips.update(h([1, 2, 3, 5], [1, 1, 0, 1]))  # 1's second flip, two iterations after its first
+    flips.update(h([1, 2, 3, 5], [0, 1, 0, 1]))  # 1's second counted change, 2's fourth
+    flips.update(h([1, 2, 3, 5], [1, 1, 0, 1]))  # 1's third, two iterations after its first
     assert flips.broken.tolist() == [1, 2]
-    assert flips.once.tolist() == [1, 2, 3, 5]

@@ -157,8 +157,8 @@ SOLVER = {
     ),
     "break_stick_cycles": Field(
         bool, True,
-        doc="implicit, flexible grains: a pair that Newton flips between stick and slip twice in a step is judged "
-            "by mu_d for the rest of it, as a pair whose static friction broke (docs/dynamics.md; without it a "
+        doc="implicit, flexible grains: a pair that Newton flips between stick and slip three times in a step is "
+            "judged by mu_d for the rest of it, as a pair whose static friction broke (docs/dynamics.md; without it a "
             "single such pair rejected the 515-grain implicit pack's steps down to 8e-7 s)",
     ),
     "impact_steps": Field(

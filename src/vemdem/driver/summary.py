@@ -109,7 +109,8 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "linear_solver": _linear(run.integrator),
         "n_energy_gain_steps": stats.energy_gains,  # implicit: steps accepted although the energy grew
         "n_frozen_pair_steps": stats.frozen_pair_steps,  # implicit: steps converged with cycling pairs kept
-        "n_stick_break_steps": stats.stick_break_steps,  # implicit: steps with pairs judged by mu_d after stick-slip cycles
+        # implicit: steps with pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
+        "n_stick_break_steps": stats.stick_break_steps,
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,

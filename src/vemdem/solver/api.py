@@ -39,7 +39,8 @@ class SolverOptions:
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
     grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
     freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
-    break_stick_cycles: bool = True  # implicit flexible: pairs Newton flips between stick and slip twice go on at mu_d
+    # implicit flexible: pairs Newton flips between stick and slip 3 times in a step go on at mu_d
+    break_stick_cycles: bool = True
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3

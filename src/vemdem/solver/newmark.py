@@ -92,8 +92,9 @@ class NewmarkParameters:
     # mu_s F_N the law has no root: Newton flips the pair between stick and slip every iterate or two
     # until its 15 iterations run out, and halving the step does not remove a jump of the force
     # (the 515-grain implicit pack: one pair flipping, rejected 5 times in a row down to 8e-7 s).
-    # With break_stick_cycles a pair that has flipped twice in a step is held to mu_d for the rest of
-    # it: its static friction broke, and the pair goes on as one that slid (continuous at mu_d F_N).
+    # With break_stick_cycles a pair that has flipped three times in a step (not counting the first
+    # update's, the predictor's miss) is held to mu_d for the rest of it: its static friction broke,
+    # and the pair goes on as one that slid (continuous at mu_d F_N).
     break_stick_cycles: bool = True
 
 
@@ -425,24 +426,29 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
 
 
 class _StickFlips:
-    """The pairs whose stick flag changed between Newton iterates, once (`once`) and twice or more
-    (`broken`: held to mu_d for the rest of the step, NewmarkParameters.break_stick_cycles); sorted
-    pair keys."""
+    """The pairs whose stick flag changed between Newton iterates (sorted pair keys): `broken` lists
+    those that changed at `times` iterations of the step (NewmarkParameters.break_stick_cycles). The
+    change from the first iterate to the second is not counted when `skip_first`: it is the
+    predictor's miss, not a cycle."""
+
+    skip_first = True
+    times = 3
 
     def __init__(self):
         self.keys = self.stick = None
-        self.once = np.zeros(0, np.int64)
+        self.flipped = [np.zeros(0, np.int64)]
         self.broken = np.zeros(0, np.int64)
+        self.seen = 0
 
     def update(self, history) -> None:
-        if self.keys is not None:
+        self.seen += 1
+        if self.keys is not None and not (self.skip_first and self.seen == 2):
             _, a, b = np.intersect1d(self.keys, history.keys, assume_unique=True, return_indices=True)
             flipped = self.keys[a[self.stick[a] != history.stick[b]]]
             if len(flipped):
-                again = np.intersect1d(flipped, self.once, assume_unique=True)
-                self.once = np.union1d(self.once, flipped)
-                if len(again):
-                    self.broken = np.union1d(self.broken, again)
+                self.flipped.append(flipped)
+                keys, counts = np.unique(np.concatenate(self.flipped), return_counts=True)
+                self.broken = keys[counts >= self.times]
         self.keys, self.stick = history.keys, history.stick
 
 

@@ -52,7 +52,7 @@ class StepInfo:
     contact: object = None  # the ContactResult at the accepted state (frames write it)
     krylov_iterations: int = 0  # linear-solver iterations of the step (iterative solvers)
     frozen_pairs: int = 0  # implicit: pairs Newton kept in its set for cycling (NewmarkParameters.freeze_cycles)
-    broken_pairs: int = 0  # implicit: pairs judged by mu_d after stick-slip cycles (NewmarkParameters.break_stick_cycles)
+    broken_pairs: int = 0  # implicit: pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
 
 
 @dataclass
