@@ -300,21 +300,12 @@ class _CoarseSpace:
             raise SingularSystemError(f"singular tangent (coarse space: {exc}); is every rigid-body mode constrained?"
                                       ) from None  # fmt: skip
 
-    def _coefficients(self, r: np.ndarray) -> np.ndarray:
-        """A_c^-1 Z^T r."""
+    def correction_and_product(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """y = Z c with c = A_c^-1 Z^T r (the coarse correction), and K y = (B Z) c + C y from the
+        products kept at set-up."""
         rc = np.empty(6 * (len(self.dof_ptr) - 1))
         _restrict(self.z, self.dof_ptr, r, rc)
-        return sla.lu_solve(self._dense, rc, check_finite=False) if self._dense is not None else self._lu.solve(rc)
-
-    def correction(self, r: np.ndarray) -> np.ndarray:
-        """Z A_c^-1 Z^T r."""
-        out = np.empty(len(r))
-        _prolong(self.z, self.dof_ptr, self._coefficients(r), out)
-        return out
-
-    def correction_and_product(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """y = Z c with c = A_c^-1 Z^T r, and K y = (B Z) c + C y from the products kept at set-up."""
-        c = self._coefficients(r)
+        c = sla.lu_solve(self._dense, rc, check_finite=False) if self._dense is not None else self._lu.solve(rc)
         y, ky = np.empty(len(r)), np.empty(len(r))
         _prolong(self.z, self.dof_ptr, c, y)
         _prolong(self.bz, self.dof_ptr, c, ky)
