@@ -133,12 +133,15 @@ def test_rigid_modes_are_the_null_space_of_a_free_grain():
     assert np.linalg.norm(K @ np.random.default_rng(0).normal(size=len(Z))) > 0
 
 
-def test_trajectories_agree_between_the_solvers():
+@pytest.mark.parametrize("dense_up_to", [10**6, 0])
+def test_trajectories_agree_between_the_solvers(monkeypatch, dense_up_to):
     """Three cubes settling on each other in a box for 3 ms (friction, damping, a few hundred
-    Newton solves): the grain-block and direct solvers give the same motion."""
+    Newton solves): the grain-block and direct solvers give the same motion, with the coarse matrix
+    factorised dense, or sparse with its LU kept across Newton matrices (inner GMRES)."""
     from vemdem.solver.newmark import NewmarkParameters, advance, initial_state
     from vemdem.solver.state import StepControl
 
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", dense_up_to)
     scene = touching_scene()
     finals = []
     for name in ("direct", "grain-block"):
@@ -151,6 +154,65 @@ def test_trajectories_agree_between_the_solvers():
     assert moved > 1e-7  # they did move
     assert np.abs(x1 - x2).max() <= 1e-6 * moved
     assert np.abs(v1 - v2).max() <= 1e-6 * np.abs(v1).max()
+    block = params.linear.stats
+    if dense_up_to == 0:  # kept LUs did work: fewer SuperLU factorisations than Newton matrices
+        assert block.coarse_iterations > 0 and 0 < block.coarse_factorisations < block.factorisations
+
+
+def _coarse_correction(system, r):
+    return grain_block._CoarseSpace(system).correction_and_product(r)[0]
+
+
+def test_a_kept_coarse_lu_solves_the_next_coarse_matrix(monkeypatch):
+    """The coarse LU of one Newton matrix, kept for the next (another step size, the contacts
+    moved), preconditions GMRES on the new coarse matrix: the correction is the new matrix's own to
+    the inner tolerance, and no second SuperLU factorisation is made."""
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", 0)
+    monkeypatch.setattr(grain_block, "KEPT_COARSE_RTOL", 1e-12)
+    first, second = real_system(shift=3.3e6), real_system(shift=2.0e6)
+    second.coupling = second.coupling * 1.2
+    r = np.random.default_rng(6).normal(size=second.n)
+    solver = GrainBlockSolver()
+    solver.factor(first)
+    solver.factor(second)
+    assert solver._coarse.fresh is False
+    kept, _ = solver._coarse.correction_and_product(r)
+    own = _coarse_correction(second, r)
+    assert np.abs(own - _coarse_correction(first, r)).max() > 1e-3 * np.abs(own).max()  # the matrices differ
+    np.testing.assert_allclose(kept, own, rtol=0, atol=1e-9 * np.abs(own).max())
+    assert solver.stats.coarse_factorisations == 1 and solver.stats.coarse_iterations > 0
+
+
+def test_a_kept_coarse_lu_that_does_not_pay_is_replaced(monkeypatch):
+    """A kept LU whose inner GMRES misses the tolerance within KEPT_COARSE_MAX iterations is
+    replaced by the new matrix's own (the correction exact again), and a Newton matrix whose coarse
+    solves needed more than KEPT_COARSE_BUDGET inner iterations hands no LU on; without keep_coarse
+    every matrix is factorised."""
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", 0)
+    monkeypatch.setattr(grain_block, "KEPT_COARSE_MAX", 1)
+    first, second = real_system(shift=3.3e6), real_system(shift=1e5)
+    r = np.random.default_rng(7).normal(size=second.n)
+    solver = GrainBlockSolver()
+    solver.factor(first)
+    solver.factor(second)
+    y, _ = solver._coarse.correction_and_product(r)
+    assert solver._coarse.fresh and solver.stats.coarse_factorisations == 2
+    np.testing.assert_allclose(y, _coarse_correction(second, r), rtol=1e-12, atol=0)
+
+    monkeypatch.setattr(grain_block, "KEPT_COARSE_MAX", 10)
+    monkeypatch.setattr(grain_block, "KEPT_COARSE_BUDGET", 0)
+    near = real_system(shift=2.0e6)
+    solver = GrainBlockSolver()
+    for system in (first, near, first):
+        solver.factor(system)
+        solver._coarse.correction_and_product(r)
+    # the 2nd matrix used the 1st's LU and spent inner iterations: the 3rd factorises its own
+    assert solver.stats.coarse_iterations > 0 and solver.stats.coarse_factorisations == 2 and solver._coarse.fresh
+
+    solver = GrainBlockSolver(keep_coarse=False)
+    for system in (first, near, first):
+        solver.factor(system)
+    assert solver.stats.coarse_factorisations == 3
 
 
 @pytest.mark.parametrize("dense_up_to", [10**6, 0])

@@ -139,6 +139,9 @@ def _linear(integrator) -> dict | None:
             "fallbacks": stats.fallbacks, "held": stats.held,
             # grain-block: solves that ended at GMRES's attainable accuracy (grain_block.STALL_ACCEPT)
             "stalled": stats.stalled,
+            # grain-block: SuperLU factorisations of coarse matrices, and the inner GMRES iterations of
+            # those solved with an LU kept from an earlier Newton matrix (grain_block.KEPT_COARSE_*)
+            "coarse_factorisations": stats.coarse_factorisations, "coarse_iterations": stats.coarse_iterations,
             "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
 
 

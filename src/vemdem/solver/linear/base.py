@@ -113,6 +113,8 @@ class SolverStats:
     fallbacks: int = 0  # auto: systems handed to the direct solver after the iterative one failed
     held: int = 0  # auto: systems sent straight to the direct solver after a hand-over (AutoSolver)
     stalled: int = 0  # grain-block: solves ended at GMRES's attainable accuracy (grain_block.STALL_ACCEPT)
+    coarse_factorisations: int = 0  # grain-block: SuperLU factorisations of the coarse matrix
+    coarse_iterations: int = 0  # grain-block: inner GMRES iterations on coarse matrices with a kept LU
 
 
 class LinearSolver(Protocol):
