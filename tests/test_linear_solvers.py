@@ -315,6 +315,32 @@ def test_auto_hands_a_failed_system_to_the_direct_solver(monkeypatch, failure):
     np.testing.assert_allclose(x, spla.spsolve(K.tocsc(), b), rtol=0, atol=1e-9 * np.abs(x).max())
 
 
+def test_auto_hands_over_a_system_whose_coarse_matrix_fails_inside_the_solve(monkeypatch):
+    """With a kept coarse LU the new coarse matrix is factorised only when the inner GMRES misses
+    (inside the solve); a singular one there is handed to the direct solver like one found at set-up."""
+    import vemdem.solver.linear as linear
+
+    monkeypatch.setattr(linear, "DENSE_LIMIT", 0)
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", 0)
+    monkeypatch.setattr(grain_block, "KEPT_COARSE_MAX", 1)
+    first, second = real_system(shift=3.3e6), real_system(shift=1e5)
+    solver = make_linear_solver("auto")
+    solver.factor(first)
+    calls = []
+
+    def singular(A):
+        calls.append(A)
+        raise RuntimeError("Factor is exactly singular")
+
+    monkeypatch.setattr(grain_block, "superlu", singular)
+    solver.factor(second)  # the first matrix's LU kept: no factorisation yet
+    b = np.random.default_rng(8).normal(size=second.n)
+    x = solver.solve(b, 1e-10)
+    assert len(calls) == 1 and solver.stats.fallbacks == 1
+    # a1 = 1e5 leaves the grains' stiffness 1e9 times their mass term: two direct solves agree to 1e-7
+    np.testing.assert_allclose(x, spla.spsolve(second.to_csr().tocsc(), b), rtol=0, atol=1e-6 * np.abs(x).max())
+
+
 def test_auto_holds_the_direct_solver_after_a_hand_over_and_tries_grain_block_again(monkeypatch):
     """A failed grain-block solve costs GMRES its whole budget; the systems after it are alike (a
     jammed pack stays jammed), so auto sends the next HOLD systems straight to the direct solver,

@@ -71,7 +71,7 @@ class AutoSolver:
             return self.direct.solve(rhs, rtol)
         try:
             x = self._current.solve(rhs, rtol)
-        except LinearSolveDiverged:
+        except (LinearSolveDiverged, SingularSystemError):  # the latter: a coarse matrix factorised in the solve
             self._fall_back()
             return self.direct.solve(rhs, rtol)
         self._hold = self.HOLD
