@@ -159,6 +159,32 @@ def test_trajectories_agree_between_the_solvers(monkeypatch, dense_up_to):
         assert block.coarse_iterations > 0 and 0 < block.coarse_factorisations < block.factorisations
 
 
+def test_a_step_keeps_no_coarse_lu_from_the_step_before(monkeypatch):
+    """A kept coarse LU changes the coarse solves' rounding, so newmark_step drops it at each step
+    (`forget`): a step is a function of its state and step alone, as a run resumed from a checkpoint
+    inside a frame needs to continue to the same bits. The same step twice with one solver (the
+    second after the first left its LU) and with a fresh solver: the same bits."""
+    from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newmark_step
+    from vemdem.solver.state import StepControl
+
+    monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", 0)
+    scene = touching_scene()
+    params = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("grain-block"))
+    state, _ = advance(scene, initial_state(scene), 1e-3, StepControl(dt=1e-5, dt_max=1e-4), params)  # settling
+    stats = params.linear.stats
+    steps, lus = [], []
+    for _ in range(2):
+        lus.append(stats.coarse_factorisations)
+        steps.append(newmark_step(scene, state, 1e-4, params)[0])
+    assert stats.coarse_factorisations - lus[1] >= 1 and lus[1] - lus[0] >= 1  # each step its own first LU
+    assert stats.coarse_iterations > 0  # and LUs kept inside the steps
+    fresh = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("grain-block"))
+    steps.append(newmark_step(scene, state, 1e-4, fresh)[0])
+    for other in steps[1:]:
+        np.testing.assert_array_equal(other.x, steps[0].x)
+        np.testing.assert_array_equal(other.v, steps[0].v)
+
+
 def _coarse_correction(system, r):
     return grain_block._CoarseSpace(system).correction_and_product(r)[0]
 

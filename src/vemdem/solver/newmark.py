@@ -324,6 +324,9 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     tw = wall_time(scene, x, state.t, t1, params.ccd_fraction)
     size = float(np.cbrt(scene.bodies.volume.mean()))
     linear = params.linear if params.linear is not None else _default_linear()
+    # nothing kept from an earlier step (a coarse LU): a step is a function of the state and the step
+    # control alone, so a run resumed from a checkpoint inside a frame continues to the same bits
+    linear.forget()
     krylov = 0
     full_before, dx_before = False, np.inf
     corrections = []

@@ -65,6 +65,10 @@ class AutoSolver:
             self.stats.last_iterations = 0
             self._fall_back()
 
+    def forget(self) -> None:
+        """The grain-block solver's kept coarse LU; the hold after a hand-over is kept (see above)."""
+        self.block.forget()
+
     def solve(self, rhs, rtol: float = 1e-10):
         if self._current is self.direct:
             self.stats.last_iterations = 0

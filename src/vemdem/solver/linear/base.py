@@ -123,4 +123,7 @@ class LinearSolver(Protocol):
 
     def factor(self, system: NewtonSystem) -> None: ...
 
+    def forget(self) -> None:
+        """Drop what was kept from earlier matrices (newmark_step calls it at each step)."""
+
     def solve(self, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray: ...

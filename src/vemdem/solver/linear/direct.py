@@ -90,6 +90,9 @@ class DirectSolver:
         self.stats = SolverStats()
         self._lu = None
 
+    def forget(self) -> None:
+        """Nothing is kept from one matrix to the next."""
+
     def factor(self, system: NewtonSystem) -> None:
         K = system.to_csr()
         self.stats.factorisations += 1

@@ -266,10 +266,11 @@ STALL_ACCEPT = 1e-6
 # made on the spot); the next matrix keeps it while this one spent at most KEPT_COARSE_BUDGET.
 # An inner iteration (the kept LU's triangular solves, 1.1 ms, and a product with the 3,090-row
 # coarse matrix, 0.1 ms, at 515 grains) against 30-40 ms for the SuperLU it saves. Measured on
-# 1e-3 s of the falling 515-grain implicit pack (docs/linear-solvers.md): 206 coarse matrices,
-# 18 SuperLU factorisations and 1,401 inner iterations at 1e-4 (at 1e-8: 59 and 1,713; at 1e-2:
-# 9 and 1,066 but 271 outer GMRES iterations against 227-233); the same steps and Newton
-# iterations as with every matrix factorised, 10-15 % less wall time.
+# 1e-3 s of the falling 515-grain implicit pack (docs/linear-solvers.md), the LU kept across
+# steps: 206 coarse matrices, 18 SuperLU factorisations and 1,401 inner iterations at 1e-4 (at
+# 1e-8: 59 and 1,713; at 1e-2: 9 and 1,066 but 271 outer GMRES iterations against 227-233); the
+# same steps and Newton iterations as with every matrix factorised. newmark_step drops the LU at
+# each step (forget), for bitwise resume: 37 factorisations and 1,078 inner iterations there.
 KEPT_COARSE_RTOL = 1e-4
 KEPT_COARSE_MAX = 10
 KEPT_COARSE_BUDGET = 12
@@ -396,6 +397,11 @@ class GrainBlockSolver:
         if self.coarse and s.positions is not None:
             self._coarse = _CoarseSpace(s, self._kept_lu(before), self.stats)
         self.stats.factorisations += 1
+
+    def forget(self) -> None:
+        """The next Newton matrix factorises its own coarse LU (newmark_step calls this at each step,
+        so that a step depends on its state alone and a resumed run continues to the same bits)."""
+        self._coarse = None
 
     def _kept_lu(self, before):
         """The coarse LU of the last Newton matrix, to precondition this one's coarse solves, while
