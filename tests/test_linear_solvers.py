@@ -212,8 +212,8 @@ def test_a_kept_coarse_lu_solves_the_next_coarse_matrix(monkeypatch):
 def test_a_kept_coarse_lu_that_does_not_pay_is_replaced(monkeypatch):
     """A kept LU whose inner GMRES misses the tolerance within KEPT_COARSE_MAX iterations is
     replaced by the new matrix's own (the correction exact again), and a Newton matrix whose coarse
-    solves needed more than KEPT_COARSE_BUDGET inner iterations hands no LU on; without keep_coarse
-    every matrix is factorised."""
+    solves needed more than KEPT_COARSE_BUDGET inner iterations hands no LU on; with
+    `forget` between them every matrix is factorised."""
     monkeypatch.setattr(grain_block, "DENSE_COARSE_BODIES", 0)
     monkeypatch.setattr(grain_block, "KEPT_COARSE_MAX", 1)
     first, second = real_system(shift=3.3e6), real_system(shift=1e5)
@@ -235,8 +235,9 @@ def test_a_kept_coarse_lu_that_does_not_pay_is_replaced(monkeypatch):
     # the 2nd matrix used the 1st's LU and spent inner iterations: the 3rd factorises its own
     assert solver.stats.coarse_iterations > 0 and solver.stats.coarse_factorisations == 2 and solver._coarse.fresh
 
-    solver = GrainBlockSolver(keep_coarse=False)
+    solver = GrainBlockSolver()
     for system in (first, near, first):
+        solver.forget()
         solver.factor(system)
     assert solver.stats.coarse_factorisations == 3
 

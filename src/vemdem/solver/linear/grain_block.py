@@ -377,10 +377,10 @@ class GrainBlockSolver:
 
     name = "grain-block"
 
-    def __init__(self, restart: int = 40, max_iterations: int = 200, coarse: bool = True, keep_coarse: bool = True):
+    def __init__(self, restart: int = 40, max_iterations: int = 200, coarse: bool = True):
         self.restart, self.max_iterations, self.coarse = restart, max_iterations, coarse
-        self.keep_coarse = keep_coarse
         self.stats = SolverStats()
+        self._coarse = None  # the last Newton matrix's coarse space, whose LU the next one may keep
 
     # ------------------------------------------------------------------ set-up per Newton matrix
     def factor(self, system: NewtonSystem) -> None:
@@ -393,7 +393,7 @@ class GrainBlockSolver:
         if bad.any():
             raise SingularSystemError(f"singular tangent block of grain {int(np.flatnonzero(bad)[0])}; "
                                       "is every rigid-body mode constrained?")  # fmt: skip
-        before, self._coarse = getattr(self, "_coarse", None), None
+        before, self._coarse = self._coarse, None
         if self.coarse and s.positions is not None:
             self._coarse = _CoarseSpace(s, self._kept_lu(before), self.stats)
         self.stats.factorisations += 1
@@ -406,7 +406,7 @@ class GrainBlockSolver:
     def _kept_lu(self, before):
         """The coarse LU of the last Newton matrix, to precondition this one's coarse solves, while
         it pays: its own or one that needed at most KEPT_COARSE_BUDGET inner iterations there."""
-        if not self.keep_coarse or before is None or before.matrix is None:
+        if before is None or before.matrix is None:
             return None
         return before._lu if before.fresh or before.inner_iterations <= KEPT_COARSE_BUDGET else None
 
