@@ -125,6 +125,53 @@ def test_resume_continues_to_the_same_result(tmp_path, monkeypatch, solver):
     assert len(list((tmp_path / "cut/grains").glob("*.vtu"))) == 15
 
 
+def test_a_run_resumed_during_the_auto_solvers_hold_continues_to_the_same_result(tmp_path, monkeypatch):
+    """auto's hold after a hand-over to the direct solver spans steps (solver/linear AutoSolver): the
+    checkpoint carries it and the solver's counters, so a run resumed while a hold lasts sends the
+    same systems to the direct solver as the uninterrupted run, and ends on the same bits and counts.
+    The drop's grains go to grain-block (DENSE_LIMIT 0), made to fail on the systems whose
+    right-hand side has a checksum divisible by 3: a choice that depends on the state alone.
+    Without the hold carried, the resumed run tries 2 more systems on GMRES; the positions still
+    agree to the bit there (Newton's last corrections are below their rounding), the counts do not."""
+    import zlib
+
+    import vemdem.solver.api as api
+    import vemdem.solver.linear as linear
+    from vemdem.solver.linear import GrainBlockSolver, LinearSolveDiverged
+
+    monkeypatch.setattr(linear, "DENSE_LIMIT", 0)
+    block_solve = GrainBlockSolver.solve
+
+    def failing(self, rhs, rtol=1e-10):
+        if zlib.crc32(np.ascontiguousarray(rhs).tobytes()) % 3 == 0:
+            raise LinearSolveDiverged("made to fail by the test")
+        return block_solve(self, rhs, rtol)
+
+    monkeypatch.setattr(GrainBlockSolver, "solve", failing)
+    made = []
+    make = api.make_linear_solver
+    monkeypatch.setattr(api, "make_linear_solver", lambda name: made.append(make(name)) or made[-1])
+    monkeypatch.setattr(loop_mod, "CHECKPOINT_EVERY_S", 0.0)
+    cfg = drop_config(duration=0.006)
+    full = scene_mod.run(cfg, tmp_path / "full")
+    assert full["linear_solver"]["fallbacks"] > 0 and full["linear_solver"]["held"] > 0
+    original = loop_mod.save_checkpoint
+
+    def interrupting(path, state, *args, **kwargs):
+        original(path, state, *args, **kwargs)
+        if state.t > 0.002 and made[-1]._skip > 0:  # inside a hold
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop_mod, "save_checkpoint", interrupting)
+    with pytest.raises(KeyboardInterrupt):
+        scene_mod.run(cfg, tmp_path / "cut")
+    monkeypatch.setattr(loop_mod, "save_checkpoint", original)
+    resumed = scene_mod.run(cfg, tmp_path / "cut", resume=True)
+    for name in ("grains.csv", "history.csv", "walls.csv"):
+        assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "full" / name).read_bytes()
+    assert resumed["linear_solver"] == full["linear_solver"]
+
+
 def test_resume_refuses_another_config(tmp_path, capsys):
     cfg = drop_config(duration=0.002)
     scene_mod.run(cfg, tmp_path)

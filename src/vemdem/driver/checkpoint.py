@@ -50,7 +50,8 @@ class WallWork:
 
 
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
-                    identity: RunIdentity, walls: WallWork | None = None):  # fmt: skip
+                    identity: RunIdentity, walls: WallWork | None = None, carried: dict | None = None):  # fmt: skip
+    """`carried`: the integrator's own (Integrator.carried), e.g. the linear solver's hold."""
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
     books = {} if walls is None else {"wall_work": walls.work, "wall_force": walls.force, "wall_t": walls.t}
@@ -60,7 +61,8 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              krylov=stats.krylov_iterations, frame=frame, fingerprint=identity.fingerprint,
              choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
-             frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps, **books,
+             frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps,
+             carried=json.dumps(carried or {}, sort_keys=True), **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -96,6 +98,13 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
     return state, stats, frame
+
+
+def load_carried(path: Path) -> dict:
+    """The integrator's own part of a checkpoint (Integrator.carry_on); {} for one written before
+    session 32 (a resumed run's linear solver then starts afresh)."""
+    with np.load(path, allow_pickle=False) as d:
+        return json.loads(str(d["carried"])) if "carried" in d.files else {}
 
 
 def load_wall_work(path: Path) -> WallWork | None:

@@ -22,7 +22,8 @@ from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
-from .checkpoint import RunIdentity, WallWork, load_checkpoint, load_wall_work, save_checkpoint, truncate_csv
+from .checkpoint import (RunIdentity, WallWork, load_carried, load_checkpoint, load_wall_work, save_checkpoint,
+                         truncate_csv)
 from .frames import FRAME_CSVS, FrameWriter
 
 
@@ -68,6 +69,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
         walls = load_wall_work(ckpt) or WallWork(0.0, last_contact.wall_reactions, state.t)
+        integrator.carry_on(load_carried(ckpt))
     else:
         try:
             history = ContactHistory(**friction0) if friction0 is not None else None
@@ -79,7 +81,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         walls = WallWork(0.0, last_contact.wall_reactions, state.t)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact, walls.work)
-        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls)
+        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried())
     last = {"shown": time.perf_counter(), "saved": time.perf_counter()}
     # Only an integrator that carries nothing between its steps but the checkpointed state and step
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
@@ -95,7 +97,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             control(st, info)
         if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
             # `frame` counts the frames written: a resumed run writes frame + 1 at its time
-            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls)
+            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls, integrator.carried())
             last["saved"] = time.perf_counter()
         if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
             last["shown"] = time.perf_counter()
@@ -113,7 +115,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             frame += 1
             last_contact = last["info"].contact
             writer.write(state, last["info"].strain_energy, last_contact, walls.work)
-            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls)
+            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried())
             last["saved"] = time.perf_counter()
             if progress:
                 taken = stats.accepted - steps_before

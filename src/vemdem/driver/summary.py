@@ -142,7 +142,7 @@ def _linear(integrator) -> dict | None:
             # grain-block: SuperLU factorisations of coarse matrices, and the inner GMRES iterations of
             # those solved with an LU kept from an earlier Newton matrix (grain_block.KEPT_COARSE_*)
             "coarse_factorisations": stats.coarse_factorisations, "coarse_iterations": stats.coarse_iterations,
-            "counted_since": "this process started (a resumed run counts from its restart)"}  # fmt: skip
+            "counted_since": "the run started (checkpoints carry the counters)"}  # fmt: skip
 
 
 def _books(run: Run) -> dict | None:

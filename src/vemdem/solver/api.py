@@ -70,6 +70,12 @@ class Integrator(Protocol):
 
     def advance(self, state: State, t_end: float, on_step, stats: RunStats) -> tuple[State, RunStats]: ...
 
+    def carried(self) -> dict:
+        """What else a checkpoint holds, beyond state and step control, for a resumed run to go on
+        as the uninterrupted one (JSON-able; `carry_on` takes it back)."""
+
+    def carry_on(self, carried: dict) -> None: ...
+
 
 class ImplicitNewmark:
     """Newmark + Newton on elements and contact (solver/newmark.py)."""
@@ -93,8 +99,8 @@ class ImplicitNewmark:
 
     @property
     def linear_stats(self):
-        """The linear solver's counters (factorisations, Krylov iterations, hand-overs) since this
-        process built the integrator: a resumed run counts from its restart."""
+        """The linear solver's counters (factorisations, Krylov iterations, hand-overs) since the
+        run started: checkpoints carry them (carried)."""
         return self.params.linear.stats
 
     def initial_state(self, x0=None, v0=None, history=None) -> State:
@@ -102,6 +108,12 @@ class ImplicitNewmark:
 
     def advance(self, state, t_end, on_step, stats):
         return advance(self.scene, state, t_end, self.control, self.params, on_step, stats)
+
+    def carried(self) -> dict:
+        return {"linear": self.params.linear.carried()}  # auto's hold after a hand-over spans steps
+
+    def carry_on(self, carried: dict) -> None:
+        self.params.linear.carry_on(carried.get("linear", {}))
 
 
 class ExplicitCentral:
@@ -123,6 +135,12 @@ class ExplicitCentral:
 
     def advance(self, state, t_end, on_step, stats):
         return advance_explicit(self.integrator, state, t_end, self.control, on_step, stats)
+
+    def carried(self) -> dict:
+        return {}  # advance() renews all it keeps at each call
+
+    def carry_on(self, carried: dict) -> None:
+        pass
 
 
 class RigidCentral(ExplicitCentral):

@@ -6,7 +6,7 @@
                   (measured: docs/linear-solvers.md)
 """
 
-from .base import LinearSolveDiverged, LinearSolver, NewtonSystem, SingularSystemError, SolverStats
+from .base import CountersCarried, LinearSolveDiverged, LinearSolver, NewtonSystem, SingularSystemError, SolverStats
 from .direct import DENSE_LIMIT, DirectSolver, pypardiso, solve, sparse_backend
 from .grain_block import GrainBlockSolver, rigid_modes
 
@@ -27,7 +27,7 @@ def single_threaded_blas() -> None:
         _BLAS_LIMIT.append(threadpool_limits(limits=1, user_api="blas"))
 
 
-class AutoSolver:
+class AutoSolver(CountersCarried):
     """Picks direct (dense LU) or grain-block per system by its size (the measured crossover), and
     hands a system to the direct solver when the grain-block path fails on it: a coarse matrix
     too ill-conditioned to factor, or GMRES not reaching its tolerance. Both were seen under a lid
@@ -68,6 +68,15 @@ class AutoSolver:
     def forget(self) -> None:
         """The grain-block solver's kept coarse LU; the hold after a hand-over is kept (see above)."""
         self.block.forget()
+
+    def carried(self) -> dict:
+        """The hold spans steps, so a checkpoint carries it: a run resumed during a hold sends the
+        same systems to the direct solver as the uninterrupted run, and continues to its bits."""
+        return {**super().carried(), "hold": self._hold, "skip": self._skip}
+
+    def carry_on(self, carried: dict) -> None:
+        super().carry_on(carried)
+        self._hold, self._skip = int(carried.get("hold", self.HOLD)), int(carried.get("skip", 0))
 
     def solve(self, rhs, rtol: float = 1e-10):
         if self._current is self.direct:

@@ -14,7 +14,7 @@ non-symmetric.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -116,6 +116,12 @@ class SolverStats:
     coarse_factorisations: int = 0  # grain-block: SuperLU factorisations of the coarse matrix
     coarse_iterations: int = 0  # grain-block: inner GMRES iterations on coarse matrices with a kept LU
 
+    def restore(self, counts: dict) -> None:
+        """Counters from a checkpoint (asdict of an earlier SolverStats), in place: a solver may
+        share its counters with another (AutoSolver and its grain-block solver)."""
+        for key in asdict(self):
+            setattr(self, key, int(counts.get(key, 0)))
+
 
 class LinearSolver(Protocol):
     name: str
@@ -127,3 +133,21 @@ class LinearSolver(Protocol):
         """Drop what was kept from earlier matrices (newmark_step calls it at each step)."""
 
     def solve(self, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray: ...
+
+    def carried(self) -> dict:
+        """What a checkpoint must hold for a resumed run to solve its next systems as the
+        uninterrupted run would, and to go on counting (JSON-able; `carry_on` takes it back)."""
+
+    def carry_on(self, carried: dict) -> None: ...
+
+
+class CountersCarried:
+    """`carried`/`carry_on` of a solver that keeps nothing across steps but its counters."""
+
+    stats: SolverStats
+
+    def carried(self) -> dict:
+        return {"stats": asdict(self.stats)}
+
+    def carry_on(self, carried: dict) -> None:
+        self.stats.restore(carried.get("stats", {}))

@@ -19,7 +19,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .base import NewtonSystem, SingularSystemError, SolverStats
+from .base import CountersCarried, NewtonSystem, SingularSystemError, SolverStats
 
 DENSE_LIMIT = 600
 
@@ -81,7 +81,7 @@ def _sparse_solve(K, b: np.ndarray) -> np.ndarray:
     return superlu(K).solve(np.asarray(b, float))
 
 
-class DirectSolver:
+class DirectSolver(CountersCarried):
     """The Newton matrix factorised once per `factor` (dense LU or SuperLU), solved exactly."""
 
     name = "direct"

@@ -31,7 +31,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from numba import njit, prange, types
 
-from .base import LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
+from .base import CountersCarried, LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
 from .direct import superlu
 
 
@@ -372,7 +372,7 @@ class _CoarseSpace:
         return self._lu.solve(rc)
 
 
-class GrainBlockSolver:
+class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (forget)
     """GMRES right-preconditioned with the multiplicative two-level grain-block preconditioner."""
 
     name = "grain-block"
