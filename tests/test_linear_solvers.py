@@ -447,7 +447,8 @@ def test_inexact_newton_keeps_the_trajectory_and_saves_krylov_iterations():
 def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     """The batched LAPACK factorisation (of each block's transpose, stored by rows) against NumPy's
     solve block by block, on blocks that need row interchanges (zero diagonal entries); a block
-    with two equal rows or a NaN is flagged, the others are not."""
+    with two equal rows or a NaN is flagged, the others are not. The coarse products the same pass
+    forms (B_g Z_g, Z_g^T B_g Z_g) against NumPy's."""
     rng = np.random.default_rng(3)
     sizes = np.array([3, 12, 30, 90, 57, 6])
     dof_ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
@@ -459,8 +460,14 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
         mats.append(A)
     blocks = np.concatenate([A.ravel() for A in mats])
     lu, piv, bad = np.empty_like(blocks), np.empty(dof_ptr[-1], np.int32), np.zeros(len(sizes), np.int64)
-    grain_block._lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad)
+    z = grain_block.rigid_modes(rng.normal(size=(dof_ptr[-1] // 3, 3)), dof_ptr // 3)
+    local, bz = np.empty((len(sizes), 6, 6)), np.empty((dof_ptr[-1], 6))
+    grain_block._lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz)
     assert not bad.any()
+    for g, A in enumerate(mats):  # the coarse products formed on the way: B_g Z_g and Z_g^T B_g Z_g
+        part = slice(dof_ptr[g], dof_ptr[g + 1])
+        np.testing.assert_allclose(bz[part], A @ z[part], rtol=1e-12, atol=1e-12 * np.abs(A).max())
+        np.testing.assert_allclose(local[g], z[part].T @ A @ z[part], rtol=1e-12, atol=1e-11 * np.abs(A).max())
     r, out = rng.normal(size=dof_ptr[-1]), np.empty(dof_ptr[-1])
     grain_block._lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out)
     for g, A in enumerate(mats):
@@ -472,7 +479,8 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     B[7] = B[11]
     broken[block_ptr[4] + 100] = np.nan
     bad[:] = 0
-    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad)
+    none = np.empty((0, 6))
+    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad, none, np.empty((0, 6, 6)), none)
     assert np.flatnonzero(bad).tolist() == [2, 4]
 
 
