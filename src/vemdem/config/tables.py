@@ -139,6 +139,11 @@ SOLVER = {
     "dt_min": Field(float, 1e-10, positive, "the run stops below this step (s)"),
     "dt_max": Field(float, 1e-4, positive, "largest step (s)"),
     "max_iterations": Field(int, 15, positive, "Newton iterations before a step is rejected"),
+    "newton_xtol": Field(
+        float, 1e-6, _in(0, 1e-3, lo_open=True),
+        "implicit, flexible grains: Newton ends when its correction is below this share of the step's displacement "
+        "(docs/dynamics.md)",
+    ),
     "easy_iterations": Field(
         int, 8, positive,
         "implicit, flexible grains: a step is easy when Newton converged in at most this many iterations; "

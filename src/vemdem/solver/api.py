@@ -36,6 +36,7 @@ class SolverOptions:
     dt_min: float = 1e-10
     dt_max: float = 1e-4
     max_iterations: int = 15
+    newton_xtol: float = 1e-6  # implicit flexible: Newton's correction tolerance (NewmarkParameters.xtol)
     easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
     grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
     freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
@@ -88,6 +89,7 @@ class ImplicitNewmark:
         self.scene = scene
         self.control = _control(options)
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
+                                        xtol=options.newton_xtol,
                                         mass_damping=options.mass_damping, predictor=options.predictor,
                                         linear=make_linear_solver(options.linear),
                                         freeze_cycles=options.freeze_cycles,

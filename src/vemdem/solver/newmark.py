@@ -48,7 +48,7 @@ class NewmarkParameters:
     beta: float = 0.3
     gamma: float = 0.5
     rtol: float = 1e-6  # residual, relative to the largest of gravity, inertia and contact forces
-    xtol: float = 1e-8  # correction, relative to the step's displacement (floor: 1e-12 grain sizes)
+    xtol: float = 1e-6  # correction, relative to the step's displacement (floor: 1e-12 grain sizes)
     max_iterations: int = 15
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
@@ -70,11 +70,12 @@ class NewmarkParameters:
     update: str = "rigid"  # "rigid": each grain's rigid part as a finite rotation (model.motion); "linear": x + alpha dx
     stall_share: float = 0.5  # share of a full update taken when Newton stalls or cycles (from the 4th iteration)
     # A stalled iteration (from the 4th) also ends when its residual is within stall_rtol of the residual
-    # tolerance and its correction within stall_xtol of the correction tolerance (1e-5 of the step's
-    # displacement): a pair creeping along its friction cone's edge switches between stick and slip every
-    # iteration there, and the correction cycles without going below 1e-8 (docs/dynamics.md). 0: off.
+    # tolerance and its correction below stall_xtol of the step's displacement (floor: 1e-9 grain sizes;
+    # the same whatever xtol is): a pair creeping along its friction cone's edge switches between stick
+    # and slip every iteration there, and the correction cycles without going below 1e-8
+    # (docs/dynamics.md). 0: off.
     stall_rtol: float = 10.0
-    stall_xtol: float = 1e3
+    stall_xtol: float = 1e-5
     # A pair that leaves and re-enters the eligible set every other iteration (a vertex-edge pair at its
     # edge's end, where no other record takes its force over: the narrow phase's selection rules make
     # the contact force jump there) leaves Newton with no root to find: the residual cycles between two
@@ -370,7 +371,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         # before is shortened.
         dx_norm = np.abs(dx).max()
         r_tol = params.rtol * scale
-        dx_tol = max(params.xtol * np.abs(du).max(), 1e-12 * size)
+        du_max, dx_floor = np.abs(du).max(), 1e-12 * size
+        dx_tol = max(params.xtol * du_max, dx_floor)
         if params.accuracy > 0:
             dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         if (at_end and it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
@@ -404,7 +406,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             params.trace(it, r_norm / r_tol, dx_norm / dx_tol, alpha, cr)
         if at_end and alpha == 1.0 and small_dx and (small_r or it > 1):
             break
-        if at_end and it >= 4 and r_norm <= params.stall_rtol * r_tol and dx_norm <= params.stall_xtol * dx_tol:
+        stalled = r_norm <= params.stall_rtol * r_tol and dx_norm <= max(params.stall_xtol * du_max, 1e3 * dx_floor)
+        if at_end and it >= 4 and stalled:
             break  # stalled at the tolerance (stall_rtol above)
         full_before, dx_before = alpha == 1.0, dx_norm
     else:
