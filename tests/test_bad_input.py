@@ -205,6 +205,22 @@ def test_bad_checkpoint_is_one_line_and_never_suggests_pickle(tmp_path, cli, con
     assert "pickle" not in err
 
 
+@pytest.mark.parametrize("carried", ["{not json", "[1, 2]", '{"linear": {"hold": "two"}}', '{"linear": {"hold": true}}'],
+                         ids=["not JSON", "a list", "a text counter", "a boolean counter"])  # fmt: skip
+def test_checkpoint_with_a_damaged_carried_entry_is_one_line(tmp_path, cli, carried):
+    """The integrator's own part of a checkpoint (the linear solver's counters and hold) is read with
+    the rest: a damaged entry is the checkpoint's one-line error, not a traceback from the solver."""
+    path = good_drop(tmp_path)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--quiet")[0] == 0
+    with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
+        entries = {k: d[k] for k in d.files}
+    entries["carried"] = np.array(carried)
+    np.savez(out / "checkpoint.npz", **entries)
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert_one_line_error(code, err, "checkpoint.npz")
+
+
 def test_non_utf8_config(tmp_path, cli):
     path = tmp_path / "job.toml"
     path.write_bytes(b"scenario = \"scene\"\nname = \"\xff\xfe\"\n")

@@ -67,8 +67,22 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
 
-def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
-    """(state, stats, frame) from a checkpoint; control.dt and easy_streak are restored in place."""
+@dataclass
+class Resumed:
+    """What a checkpoint gives back: the state and the run's books at its frame. `walls` is None for
+    a checkpoint written before session 21 (the walls' work book then starts again at the resume);
+    `carried` is {} for one written before session 32 (the linear solver then starts afresh)."""
+
+    state: State
+    stats: RunStats
+    frame: int
+    walls: WallWork | None
+    carried: dict
+
+
+def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> Resumed:
+    """The run at a checkpoint, read in one pass; control.dt and easy_streak are restored in place.
+    Anything unreadable, from another config or of the wrong shape is a CheckpointError naming the file."""
     if not path.is_file():
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
@@ -82,38 +96,53 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity):
                           bodies)  # fmt: skip
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
-            krylov = int(d["krylov"]) if "krylov" in d.files else 0
-            stats = RunStats(int(d["accepted"]), int(d["rejected"]), int(d["newton"]), krylov)
-            if "rejections" in d.files:
-                stats.rejections = json.loads(str(d["rejections"]))
-                stats.energy_gains = int(d["energy_gains"])
-            if "frozen_pair_steps" in d.files:  # checkpoints before session 14 have none
-                stats.frozen_pair_steps = int(d["frozen_pair_steps"])
-            if "stick_break_steps" in d.files:  # checkpoints before session 30 have none
-                stats.stick_break_steps = int(d["stick_break_steps"])
-            frame = int(d["frame"])
+            resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d))
     except CheckpointError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
-    return state, stats, frame
+    return resumed
 
 
-def load_carried(path: Path) -> dict:
-    """The integrator's own part of a checkpoint (Integrator.carry_on); {} for one written before
-    session 32 (a resumed run's linear solver then starts afresh)."""
-    with np.load(path, allow_pickle=False) as d:
-        return json.loads(str(d["carried"])) if "carried" in d.files else {}
+def _run_stats(d) -> RunStats:
+    krylov = int(d["krylov"]) if "krylov" in d.files else 0
+    stats = RunStats(int(d["accepted"]), int(d["rejected"]), int(d["newton"]), krylov)
+    if "rejections" in d.files:
+        stats.rejections = json.loads(str(d["rejections"]))
+        stats.energy_gains = int(d["energy_gains"])
+    if "frozen_pair_steps" in d.files:  # checkpoints before session 14 have none
+        stats.frozen_pair_steps = int(d["frozen_pair_steps"])
+    if "stick_break_steps" in d.files:  # checkpoints before session 30 have none
+        stats.stick_break_steps = int(d["stick_break_steps"])
+    return stats
 
 
-def load_wall_work(path: Path) -> WallWork | None:
-    """The walls' work book of a checkpoint; None for one written before session 21 (the book then
-    starts again at the resume)."""
-    with np.load(path, allow_pickle=False) as d:
-        if "wall_work" not in d.files:
-            return None
-        return WallWork(float(d["wall_work"]), d["wall_force"].copy(), float(d["wall_t"]))
+def _wall_work(d) -> WallWork | None:
+    if "wall_work" not in d.files:
+        return None
+    return WallWork(float(d["wall_work"]), d["wall_force"].copy(), float(d["wall_t"]))
+
+
+def _carried(d) -> dict:
+    """The integrator's own part (Integrator.carry_on). vemdem writes a JSON object of counters: nested
+    objects whose leaves are integers; anything else is a damaged file (ValueError)."""
+    if "carried" not in d.files:
+        return {}
+    carried = json.loads(str(d["carried"]))
+    if not _counters(carried):
+        raise ValueError("carried: not an object of integer counters")
+    return carried
+
+
+def _counters(tree) -> bool:
+    if isinstance(tree, dict):
+        return all(isinstance(k, str) and (_counters(v) or _integer(v)) for k, v in tree.items())
+    return False
+
+
+def _integer(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _changes(then: dict | None, identity: RunIdentity, shown: int = 3) -> str:

@@ -22,8 +22,7 @@ from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
-from .checkpoint import (RunIdentity, WallWork, load_carried, load_checkpoint, load_wall_work, save_checkpoint,
-                         truncate_csv)
+from .checkpoint import RunIdentity, WallWork, load_checkpoint, save_checkpoint, truncate_csv
 from .frames import FRAME_CSVS, FrameWriter
 
 
@@ -63,13 +62,14 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
     ckpt = out_dir / "checkpoint.npz"
     n_frames = _n_frames(duration, every)
     if resume:
-        state, stats, frame = load_checkpoint(ckpt, steps, identity)
+        resumed = load_checkpoint(ckpt, steps, identity)
+        state, stats, frame = resumed.state, resumed.stats, resumed.frame
         for name in FRAME_CSVS:
             truncate_csv(out_dir / name, state.t)
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
-        walls = load_wall_work(ckpt) or WallWork(0.0, last_contact.wall_reactions, state.t)
-        integrator.carry_on(load_carried(ckpt))
+        walls = resumed.walls or WallWork(0.0, last_contact.wall_reactions, state.t)
+        integrator.carry_on(resumed.carried)
     else:
         try:
             history = ContactHistory(**friction0) if friction0 is not None else None

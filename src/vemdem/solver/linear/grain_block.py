@@ -58,8 +58,8 @@ def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz):
 
     With rigid modes z (rows of Z; none: z.shape[0] == 0) the copy also forms the coarse space's
     products, bz's rows of grain g = B_g Z_g and local[g] = Z_g^T B_g Z_g, while each row of the
-    block is in cache: one pass over the blocks (33 MB at 515 grains) instead of two
-    (`_coarse_blocks`, the same products to round-off; docs/linear-solvers.md)."""
+    block is in cache: one pass over the blocks (33 MB at 515 grains) instead of a second one for
+    two BLAS products per grain (docs/linear-solvers.md)."""
     one = np.ones(1)
     one_piv = np.empty(1, np.int32)
     _GETRF(_DOUBLE, 1, 1, one.ctypes, 1, one_piv.ctypes)
@@ -132,25 +132,6 @@ def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out):
                 y[k] = y[p]
                 y[p] = t
         out[p0 : p0 + n] = y
-
-
-@njit(parallel=True, cache=True)
-def _coarse_blocks(blocks, block_ptr, dof_ptr, z, out, bz_out):
-    """out[g] = Z_g^T B_g Z_g (6 x 6) for every grain, and bz_out's rows of grain g = B_g Z_g; z (n, 6)
-    holds Z's rows. Two BLAS products per grain. The solver forms them in `_lu_blocks`' pass over
-    the blocks; this is the coarse space of a system whose blocks are not factorised (tests)."""
-    for g in prange(len(dof_ptr) - 1):
-        n = dof_ptr[g + 1] - dof_ptr[g]
-        b0, p0 = block_ptr[g], dof_ptr[g]
-        zg = np.ascontiguousarray(z[p0 : p0 + n])
-        bz = np.dot(blocks[b0 : b0 + n * n].reshape(n, n), zg)
-        c = np.dot(zg.T, bz)
-        for a in range(6):  # element loops: a slice assignment compiles an error path (seconds)
-            for k in range(6):
-                out[g, a, k] = c[a, k]
-        for i in range(n):
-            for a in range(6):
-                bz_out[p0 + i, a] = bz[i, a]
 
 
 @njit(cache=True, parallel=True)
@@ -320,15 +301,11 @@ class _CoarseSpace:
     """A_c = Z^T K Z in 6 x 6 body blocks (compiled, no sparse products) and its LU, or an LU kept
     from an earlier Newton matrix that preconditions a short inner GMRES on A_c (KEPT_COARSE_*)."""
 
-    def __init__(self, s: NewtonSystem, kept=None, stats: SolverStats | None = None, products=None):
-        """products: (Z's rows, Z_g^T B_g Z_g, B_g Z_g) when made with the block LU (`_lu_blocks`)."""
+    def __init__(self, s: NewtonSystem, products, kept=None, stats: SolverStats | None = None):
+        """products: (Z's rows, Z_g^T B_g Z_g, B_g Z_g), summed in the block LU's pass (`_lu_blocks`)."""
         G = s.n_bodies
         self.stats = stats if stats is not None else SolverStats()
         self.dof_ptr = s.dof_ptr
-        if products is None:
-            z, local, bz = rigid_modes(s.positions, s.dof_ptr // 3), np.zeros((G, 6, 6)), np.empty((s.n, 6))
-            _coarse_blocks(s.blocks, s.block_ptr, s.dof_ptr, z, local, bz)
-            products = z, local, bz
         # bz = blockdiag(B_g) Z: K Z = bz + C Z without a pass over the blocks
         self.z, local, self.bz = products
         keys = np.arange(G, dtype=np.int64) * (G + 1)  # the diagonal blocks
@@ -431,7 +408,7 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
                                       "is every rigid-body mode constrained?")  # fmt: skip
         before, self._coarse = self._coarse, None
         if coarse:
-            self._coarse = _CoarseSpace(s, self._kept_lu(before), self.stats, (z, local, bz))
+            self._coarse = _CoarseSpace(s, (z, local, bz), self._kept_lu(before), self.stats)
         self.stats.factorisations += 1
 
     def forget(self) -> None:
