@@ -6,7 +6,7 @@ import pytest
 
 from vemdem.contact.friction import FrictionLaw
 from vemdem.contact.law import InterfaceLaw, normal_force
-from vemdem.contact.model import ContactHistory, ContactModel, PenetrationError
+from vemdem.contact.model import ContactHistory, ContactModel, PenetrationError, pair_keys
 from vemdem.contact.walls import MeshWall, Motion, PlaneWall
 from vemdem.io.surfaces import load_mesh_wall
 from vemdem.geometry import cube, rotation_matrix
@@ -83,6 +83,36 @@ def test_slipping_pairs_are_judged_by_mu_d():
     assert [stick[k] for k in history.keys.tolist()] == [False, False, True, True]
     F = -res.force.sum(axis=0)
     assert F[0] == pytest.approx(-(2 * 0.4 + 2 * 0.45) * fn_pair, rel=1e-9)
+
+
+@pytest.mark.parametrize("tangent", [False, True])
+def test_undamped_pairs_carry_the_forces_of_a_law_without_damping(tangent):
+    """`undamped` (Newton's cycles on the damping's no-adhesion clamp, NewmarkParameters.hold_damping_cycles):
+    the listed pairs of a cube pressed onto the floor while approaching it carry the force and tangent of
+    the same law with damping_ratio 0, the others those of the damped law."""
+    damped = FrictionLaw(mu_s=0.5, mu_d=0.4, tangential_penalty=EPS_T, damping_ratio=0.5)
+    c, model = cube_on_floor(damped)
+    _, plain = cube_on_floor(FrictionLaw(mu_s=0.5, mu_d=0.4, tangential_penalty=EPS_T, damping_ratio=0.0))
+    x = c.vertices.copy()
+    v = np.tile([2e-4, 0.0, -1e-3], (len(x), 1))  # approaching and sliding
+    history = model.evaluate(x, 0.0, model.search(x, 0.0)).trial_history  # the pairs start, sticking
+    x1 = x + 1e-9 * np.array([1.0, 0.0, -1.0])
+    args = (x1, 0.0, model.search(x1, 0.0), history)
+    listed = history.keys[:2]
+    res = model.evaluate(*args, v=v, a4=1e4, tangent=tangent, undamped=listed)
+    with_damping = model.evaluate(*args, v=v, a4=1e4, tangent=tangent)
+    without = plain.evaluate(*args, v=v, a4=1e4, tangent=tangent)
+    keys = res.trial_history.keys  # the records' order is the same in all three (same state, same search)
+    rows = pair_keys(res.ints)
+    is_listed = np.isin(rows, listed)
+    assert is_listed.sum() == 2 and len(keys) == 4
+    for reference, chosen in ((without, is_listed), (with_damping, ~is_listed)):
+        np.testing.assert_array_equal(pair_keys(reference.ints), rows)
+        np.testing.assert_allclose(res.local_forces[1][chosen], reference.local_forces[1][chosen], rtol=1e-12, atol=0)
+        if tangent:
+            np.testing.assert_allclose(res.pair_tangent[chosen], reference.pair_tangent[chosen], rtol=1e-12, atol=0)
+    # the damping is there to take away: the damped law pushes harder on the approaching cube
+    assert -with_damping.force.sum(axis=0)[2] > -res.force.sum(axis=0)[2] > -without.force.sum(axis=0)[2]
 
 
 def test_history_is_reset_when_the_pair_ends():

@@ -227,3 +227,40 @@ def test_pairs_that_flip_between_stick_and_slip_three_times_are_broken():
     flips.update(h([1, 2, 3, 5], [0, 1, 0, 1]))  # 1's second counted change, 2's fourth
     flips.update(h([1, 2, 3, 5], [1, 1, 0, 1]))  # 1's third, two iterations after its first
     assert flips.broken.tolist() == [1, 2]
+
+
+def test_pairs_whose_damping_switches_three_times_go_on_undamped():
+    """newmark._DampingFlips: a pair is damped at an iterate where its dissipative force is not zero
+    (the no-adhesion clamp zeroes damping and friction together); a pair whose damping switched on or
+    off at three iterates, the first update's change not counted, is listed, read from the records'
+    features whatever their order in the contact result."""
+    from types import SimpleNamespace
+
+    from vemdem.contact.model import pair_keys
+    from vemdem.contact.pairs import FEATURE_A, FEATURE_B, INT_COLS, KIND
+    from vemdem.solver.newmark import _DampingFlips
+
+    ints = np.zeros((3, INT_COLS), np.int64)
+    ints[:, KIND], ints[:, FEATURE_A], ints[:, FEATURE_B] = 1, [7, 3, 5], [11, 12, 13]
+    keys = pair_keys(ints)
+
+    def result(damped, order=(0, 1, 2)):
+        local = np.zeros((3, 6, 3))
+        local[np.array(damped, bool), 0, 2] = 1e-7
+        order = list(order)
+        return SimpleNamespace(ints=ints[order], local_forces=(np.zeros((3, 6, 3)), local[order]))
+
+    flips = _DampingFlips()
+    assert flips.times == 3 and flips.skip_first
+    flips.update(result([1, 1, 1]))
+    flips.update(result([0, 1, 1]))  # the predictor's miss: not counted
+    flips.update(result([1, 0, 1], order=(2, 0, 1)))
+    flips.update(result([0, 1, 1], order=(1, 2, 0)))
+    assert flips.broken.tolist() == []
+    flips.update(result([1, 0, 1]))  # the first and the second record: their third counted change
+    assert flips.broken.tolist() == sorted(keys[:2].tolist())
+    without = SimpleNamespace(ints=ints, local_forces=(np.zeros((3, 6, 3)),))  # no friction law: nothing to hold
+    fresh = _DampingFlips()
+    for _ in range(5):
+        fresh.update(without)
+    assert fresh.broken.tolist() == []

@@ -32,7 +32,7 @@ from .forces import (
     scatter_local_forces,
     scatter_pair_tangents,
 )
-from .friction import MU_D, MU_S, FrictionLaw, dissipative_forces, dissipative_terms
+from .friction import MU_D, MU_S, ZETA, FrictionLaw, dissipative_forces, dissipative_terms
 from .feature_list import FeatureList
 from .law import InterfaceLaw
 from .narrow import VERTEX_FACE
@@ -325,14 +325,16 @@ class ContactModel:
 
     def evaluate(self, x, t, candidates, history: ContactHistory | None = None, v=None, a4: float = 0.0,
                  tangent: bool = False, frozen: FrozenPairs | None = None,
-                 slipping: np.ndarray | None = None) -> ContactResult:  # fmt: skip
+                 slipping: np.ndarray | None = None, undamped: np.ndarray | None = None) -> ContactResult:  # fmt: skip
         """Contact energy, residual (dPhi/dx + dissipative terms), tangent and wall reactions.
 
         v: vertex velocities at this state and a4 = dv/dx (Newmark); None and 0 for statics.
         frozen: records kept whether or not the narrow phase finds them now (Newton's cycling pairs).
         slipping: sorted pair keys whose static friction broke in this step (Newton's stick-slip
         cycles, solver.newmark.NewmarkParameters.break_stick_cycles): judged as pairs that slipped
-        at the last step, by mu_d."""
+        at the last step, by mu_d.
+        undamped: sorted pair keys without normal damping for the rest of this step (Newton's
+        cycles on the damping's no-adhesion clamp, NewmarkParameters.hold_damping_cycles)."""
         x_all, ints, floats = _with_frozen(*self.pairs(x, t, candidates), frozen, self.law.activation_gap)
         n_all = len(x_all)
         conservative = evaluate_contacts(x_all, ints, floats, self.law_params, n_all, tangent)
@@ -359,7 +361,10 @@ class ContactModel:
             # the dissipative tangent is added into the conservative one in place (19 MB per array
             # at the 7,356 pairs of the 515-grain lid jam)
             local_tangent = pair_tangent if tangent else np.zeros((1, 18, 18))
-            _dissipative(self, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
+            fr = self.pair_friction(ints)
+            if undamped is not None and len(undamped):
+                fr[np.isin(keys, undamped), ZETA] = 0.0
+            _dissipative(self, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, fr, tangent,
                          local_force, local_tangent, stick_now, gt_now)  # fmt: skip
             extra = np.zeros_like(x_all)
             scatter_local_forces(ints, local_force, extra)
@@ -512,9 +517,9 @@ def _twinned(x_all, q_ints, q_floats, ints, floats, tol: float) -> np.ndarray:
     return ((np.minimum(direct, swapped) <= tol) & same_grains).any(axis=1)
 
 
-def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, tangent,
+def _dissipative(model, x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, fr, tangent,
                  local_force, local_tangent, stick_now, gt_now):  # fmt: skip
-    common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, model.pair_friction(ints),
+    common = (x_all, v_all, a4, ints, c_prev, gt_prev, found, stick_prev, model.law_params, fr,
               model.masses_of_pairs(ints), local_force)  # fmt: skip
     if tangent:
         dissipative_terms(*common, local_tangent, stick_now, gt_now)

@@ -62,6 +62,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
              frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps,
+             damping_hold_steps=stats.damping_hold_steps,
              carried=json.dumps(carried or {}, sort_keys=True), **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
@@ -115,6 +116,8 @@ def _run_stats(d) -> RunStats:
         stats.frozen_pair_steps = int(d["frozen_pair_steps"])
     if "stick_break_steps" in d.files:  # checkpoints before session 30 have none
         stats.stick_break_steps = int(d["stick_break_steps"])
+    if "damping_hold_steps" in d.files:  # checkpoints before session 33 have none
+        stats.damping_hold_steps = int(d["damping_hold_steps"])
     return stats
 
 

@@ -111,6 +111,8 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_frozen_pair_steps": stats.frozen_pair_steps,  # implicit: steps converged with cycling pairs kept
         # implicit: steps with pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
         "n_stick_break_steps": stats.stick_break_steps,
+        # implicit: steps with pairs undamped after cycles on the damping's clamp (hold_damping_cycles)
+        "n_damping_hold_steps": stats.damping_hold_steps,
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,

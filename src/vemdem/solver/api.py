@@ -42,6 +42,8 @@ class SolverOptions:
     freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
     # implicit flexible: pairs Newton flips between stick and slip 3 times in a step go on at mu_d
     break_stick_cycles: bool = True
+    # implicit flexible: pairs whose damping Newton switches on and off 3 times in a step go on undamped
+    hold_damping_cycles: bool = True
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -93,7 +95,8 @@ class ImplicitNewmark:
                                         mass_damping=options.mass_damping, predictor=options.predictor,
                                         linear=make_linear_solver(options.linear),
                                         freeze_cycles=options.freeze_cycles,
-                                        break_stick_cycles=options.break_stick_cycles)  # fmt: skip
+                                        break_stick_cycles=options.break_stick_cycles,
+                                        hold_damping_cycles=options.hold_damping_cycles)  # fmt: skip
         # Newton's iterates move grains a fraction of a gap between narrow phases (one per iteration):
         # on the 515-grain collapse the list takes the narrow phase from 23 to 8.5 ms per Newton
         # iteration, the same records (docs/contact.md)

@@ -97,6 +97,13 @@ class NewmarkParameters:
     # update's, the predictor's miss) is held to mu_d for the rest of it: its static friction broke,
     # and the pair goes on as one that slid (continuous at mu_d F_N).
     break_stick_cycles: bool = True
+    # A pair whose normal damping switched on and off at three iterates of a step (not counting the
+    # first update's) is undamped for the rest of it: at the outer edge of the layer the damping,
+    # 2 zeta sqrt(k m) |g_n dot| with k -> 0 like (gbar - g), outweighs the elastic force by 1e5,
+    # and the no-adhesion clamp F_N = max(f_n + F_d, 0) is a kink Newton crossed both ways every
+    # other iterate until its 15 iterations ran out (all three Newton rejections traced in the
+    # 515-grain collapse; docs/dynamics.md). Taking a pair's damping away never adds energy.
+    hold_damping_cycles: bool = True
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None) -> State:
@@ -333,6 +340,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     corrections = []
     frozen, key_trail = None, []
     flips = _StickFlips() if params.break_stick_cycles else None
+    damping = _DampingFlips() if params.hold_damping_cycles else None
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
     for it in range(1, params.max_iterations + 1):
@@ -342,13 +350,16 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         try:
             el = scene.bodies.evaluate(x, tangent=True, mass_shift=a1 + params.mass_damping * a4)
             cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen,
-                                  slipping=None if flips is None else flips.broken)  # fmt: skip
+                                  slipping=None if flips is None else flips.broken,
+                                  undamped=None if damping is None else damping.broken)  # fmt: skip
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
         if params.freeze_cycles and tw == t1:
             frozen = _freeze_cycling(key_trail, cr.ints, cr.floats, frozen)
         if flips is not None:
             flips.update(cr.trial_history)
+        if damping is not None:
+            damping.update(cr)
         inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
         at_end = tw == t1
@@ -418,7 +429,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     try:
         el = scene.bodies.evaluate(x)
         cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4,
-                              slipping=None if flips is None else flips.broken)  # fmt: skip
+                              slipping=None if flips is None else flips.broken,
+                              undamped=None if damping is None else damping.broken)  # fmt: skip
     except (InvertedElementError, PenetrationError) as exc:
         raise StepRejected(str(exc)) from None
     missed = missed_pairs(contact, x, t1, candidates)
@@ -427,35 +439,58 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
     info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
-                    0 if frozen is None else len(frozen.keys), 0 if flips is None else len(flips.broken))  # fmt: skip
+                    0 if frozen is None else len(frozen.keys), 0 if flips is None else len(flips.broken),
+                    0 if damping is None else len(damping.broken))  # fmt: skip
     return new, info
 
 
-class _StickFlips:
-    """The pairs whose stick flag changed between Newton iterates (sorted pair keys): `broken` lists
-    those that changed at `times` iterations of the step (NewmarkParameters.break_stick_cycles). The
-    change from the first iterate to the second is not counted when `skip_first`: it is the
-    predictor's miss, not a cycle."""
+class _Flips:
+    """The pairs whose flag (stick; damped) changed between Newton iterates (sorted pair keys):
+    `broken` lists those that changed at `times` iterations of the step. The change from the first
+    iterate to the second is not counted when `skip_first`: it is the predictor's miss, not a cycle."""
 
     skip_first = True
     times = 3
 
     def __init__(self):
-        self.keys = self.stick = None
+        self.keys = self.flags = None
         self.flipped = [np.zeros(0, np.int64)]
         self.broken = np.zeros(0, np.int64)
         self.seen = 0
 
-    def update(self, history) -> None:
+    def update_flags(self, keys: np.ndarray, flags: np.ndarray) -> None:
+        """keys sorted and unique, flags the pairs' booleans at this iterate."""
         self.seen += 1
         if self.keys is not None and not (self.skip_first and self.seen == 2):
-            _, a, b = np.intersect1d(self.keys, history.keys, assume_unique=True, return_indices=True)
-            flipped = self.keys[a[self.stick[a] != history.stick[b]]]
+            _, a, b = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
+            flipped = self.keys[a[self.flags[a] != flags[b]]]
             if len(flipped):
                 self.flipped.append(flipped)
-                keys, counts = np.unique(np.concatenate(self.flipped), return_counts=True)
-                self.broken = keys[counts >= self.times]
-        self.keys, self.stick = history.keys, history.stick
+                every, counts = np.unique(np.concatenate(self.flipped), return_counts=True)
+                self.broken = every[counts >= self.times]
+        self.keys, self.flags = keys, flags
+
+
+class _StickFlips(_Flips):
+    """Pairs whose stick flag changed at three iterates (NewmarkParameters.break_stick_cycles)."""
+
+    def update(self, history) -> None:
+        self.update_flags(history.keys, history.stick)
+
+
+class _DampingFlips(_Flips):
+    """Pairs whose normal damping switched on or off at three iterates (hold_damping_cycles): the
+    no-adhesion clamp F_N = max(f_n + F_d, 0) zeroes a pair's damping and friction where the pair
+    separates faster than f_n / c_n, and at the outer edge of the layer, where f_n is 1e-12 N and
+    the damping 2 zeta sqrt(k m) |g_n dot| 1e-7 N, Newton's iterates crossed that kink both ways
+    every other iteration (docs/dynamics.md). A pair is damped where its dissipative force is not 0."""
+
+    def update(self, cr) -> None:
+        if len(cr.local_forces) < 2 or not len(cr.ints):
+            return self.update_flags(np.zeros(0, np.int64), np.zeros(0, bool))
+        keys, first = np.unique(pair_keys(cr.ints), return_index=True)
+        damped = np.any(cr.local_forces[1][first] != 0.0, axis=(1, 2))
+        self.update_flags(keys, damped)
 
 
 def _forcing(params: NewmarkParameters, eta: float, r_before: float | None, r_now: float) -> float:
@@ -610,6 +645,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         stats.krylov_iterations += info.krylov_iterations
         stats.frozen_pair_steps += info.frozen_pairs > 0
         stats.stick_break_steps += info.broken_pairs > 0
+        stats.damping_hold_steps += info.undamped_pairs > 0
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)

@@ -53,6 +53,7 @@ class StepInfo:
     krylov_iterations: int = 0  # linear-solver iterations of the step (iterative solvers)
     frozen_pairs: int = 0  # implicit: pairs Newton kept in its set for cycling (NewmarkParameters.freeze_cycles)
     broken_pairs: int = 0  # implicit: pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
+    undamped_pairs: int = 0  # implicit: pairs undamped after cycles on the damping's clamp (hold_damping_cycles)
 
 
 @dataclass
@@ -84,6 +85,7 @@ class RunStats:
     energy_gains: int = 0  # implicit: steps accepted although the energy grew (below 1e-3 dt_max, or not shrunk by halving)
     frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs kept (freeze_cycles)
     stick_break_steps: int = 0  # implicit: steps with pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
+    damping_hold_steps: int = 0  # implicit: steps with pairs undamped after cycles on the damping's clamp
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
     def reject(self, exc: BaseException) -> None:
