@@ -131,10 +131,11 @@ def best(f, repeat):
 STEP_ITERATIONS = 40  # the lid cycle's budget: a long step that converges in 16-40 iterations is reported
 
 
-def one_step(scene, state, dt, solver_name, repeat):
+def one_step(scene, state, dt, solver_name, repeat, rotated=NewmarkParameters.rotated_tangent):
     """Wall seconds (best of `repeat`), Newton and Krylov iterations of one implicit step from
     `state` (nan, -1, -1 when the step is rejected: reported, not fatal)."""
-    params = NewmarkParameters(BETA, GAMMA, linear=make_linear_solver(solver_name), max_iterations=STEP_ITERATIONS)
+    params = NewmarkParameters(BETA, GAMMA, linear=make_linear_solver(solver_name), max_iterations=STEP_ITERATIONS,
+                               rotated_tangent=rotated)
     try:
         wall, (_, info) = best(lambda: newmark_step(scene, state, dt, params), repeat)
     except StepRejected:
@@ -142,19 +143,19 @@ def one_step(scene, state, dt, solver_name, repeat):
     return wall, info.iterations, info.krylov_iterations
 
 
-def measure(scene, state, dt, solver_name, repeat):
+def measure(scene, state, dt, solver_name, repeat, rotated=NewmarkParameters.rotated_tangent):
     a1, a4 = 1 / (BETA * dt * dt), GAMMA / (BETA * dt)
     contact = scene.contact
     # as the implicit integrator does (solver/api.py): Newton's iterations reuse the feature pairs,
     # so the best of `repeat` calls is an iteration's narrow phase with every list kept
     contact.keep_feature_list(FEATURE_SKIN_GAPS * contact.law.activation_gap)
     cand = contact.search(state.x, state.t)
-    t_el, el = best(lambda: scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1), repeat)
+    t_el, el = best(lambda: scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1, rotated_strain=rotated), repeat)
     t_c, cr = best(lambda: contact.evaluate(state.x, state.t, cand, state.history, v=state.v, a4=a4, tangent=True),
                    repeat)  # fmt: skip
 
     def assemble():
-        ev = scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1)
+        ev = scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1, rotated_strain=rotated)
         t0 = time.perf_counter()
         blocks, coupling = newton_blocks(scene, ev, cr)
         return time.perf_counter() - t0, NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling,
@@ -194,6 +195,8 @@ def main():
     p.add_argument("--solvers", default="direct,grain-block")
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--json", type=Path)
+    p.add_argument("--rotated-tangent", type=float, default=NewmarkParameters.rotated_tangent, metavar="STRAIN",
+                   help="the solver's rotated_tangent (0: every grain's exact element tangent)")
     args = p.parse_args()
     cases = [deposit_case(int(n)) for n in args.grains.split(",") if n]
     tiles = [tuple(int(k) for k in t.split("x")) for t in args.tile.split(",") if t]
@@ -206,9 +209,10 @@ def main():
     for name, scene, state in cases:
         for dt in (float(d) for d in args.dt.split(",")):
             for solver in args.solvers.split(","):
-                m = measure(scene, state, dt, solver, args.repeat)
+                m = measure(scene, state, dt, solver, args.repeat, args.rotated_tangent)
                 if args.step:
-                    m["step"], m["newton"], m["step_krylov"] = one_step(scene, state, dt, solver, args.repeat)
+                    m["step"], m["newton"], m["step_krylov"] = one_step(scene, state, dt, solver, args.repeat,
+                                                                        args.rotated_tangent)
                 rows.append({"pack": name, "n_grains": scene.n_grains, "dt": dt, "solver": solver, **m})
                 print(f"{name:>14} {dt:7.0e} {solver:>11} {m['contacts_per_grain']:7.2f} "
                       + " ".join(f"{1e3 * m[k]:8.1f}" for k in ("element", "contact", "assembly", "factor", "solve"))

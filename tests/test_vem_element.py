@@ -13,6 +13,7 @@ from vemdem.vem.element import (
     projected_deformation_gradients,
     tangent_matrix,
 )
+from vemdem.vem.mass import build_mass
 from vemdem.vem.material import Material
 
 MAT = Material(E=90e9, nu=0.16, density=2200.0)
@@ -196,3 +197,56 @@ def test_material_constants():
         Material(1.0, 0.5, 1.0)
     with pytest.raises(ValueError, match="E"):
         Material(-1.0, 0.3, 1.0)
+
+
+def _rigidly_moved(el, rng, strain=0.0):
+    """Every grain rotated at random and shifted, after an affine strain of this size about its centroid."""
+    x = np.empty_like(el.reference)
+    for g in range(el.n_grains):
+        sl = slice(el.vertex_ptr[g], el.vertex_ptr[g + 1])
+        c = el.reference[sl].mean(axis=0)
+        stretch = np.eye(3) + strain * rng.uniform(-1.0, 1.0, size=(3, 3))
+        x[sl] = c + (el.reference[sl] - c) @ stretch.T @ random_rotation(rng).T + rng.normal(size=3) * 1e-3
+    return x
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.5, 1.0])
+def test_rotated_tangent_is_exact_for_rigid_motions(beta, rng):
+    """`rotated_strain`: K(R X + t) = (I (x) R) K(X) (I (x) R)^T, since P(R U) = R P(U) and P(I) = 0."""
+    el = build_elements(grains(), MAT, VemOptions(beta_internal=beta))
+    x = _rigidly_moved(el, rng)
+    exact = evaluate(el, x, tangent=True)
+    rotated = evaluate(el, x, tangent=True, rotated_strain=1e-4)
+    assert rotated.rotated.all() and not exact.rotated.any()
+    np.testing.assert_allclose(rotated.blocks, exact.blocks, rtol=0, atol=1e-9 * np.abs(exact.blocks).max())
+    np.testing.assert_array_equal(rotated.force, exact.force)  # the residual is never approximated
+    np.testing.assert_array_equal(rotated.energy, exact.energy)
+
+
+@pytest.mark.parametrize("strain", [1e-7, 1e-6, 1e-5])
+def test_rotated_tangent_is_off_by_the_order_of_the_strain(strain, rng):
+    """Below the bound the block is the rotated reference one, its error O(strain) against the exact
+    tangent (itself checked against finite differences above); above it the exact block, bit for bit."""
+    el = build_elements(grains(), MAT, VemOptions(beta_internal=0.5))
+    x = _rigidly_moved(el, rng, strain)
+    exact = evaluate(el, x, tangent=True)
+    rotated = evaluate(el, x, tangent=True, rotated_strain=100 * strain)
+    assert rotated.rotated.all()
+    error = np.abs(rotated.blocks - exact.blocks).max() / np.abs(exact.blocks).max()
+    assert 1e-3 * strain < error < 10 * strain
+    strict = evaluate(el, x, tangent=True, rotated_strain=0.01 * strain)
+    assert not strict.rotated.any()
+    np.testing.assert_array_equal(strict.blocks, exact.blocks)
+
+
+def test_rotated_tangent_keeps_the_mass_shift_and_inversion(rng):
+    el = build_elements(grains(), MAT, VemOptions(beta_internal=0.5))
+    mass = build_mass(grains(), el, MAT.density)
+    x = _rigidly_moved(el, rng)
+    shifted = evaluate(el, x, tangent=True, mass=mass, mass_shift=3e8, rotated_strain=1e-4)
+    plain = evaluate(el, x, tangent=True, mass=mass, mass_shift=3e8)
+    np.testing.assert_allclose(shifted.blocks, plain.blocks, rtol=0, atol=1e-9 * np.abs(plain.blocks).max())
+    x[el.vertex_ptr[2] : el.vertex_ptr[3], 2] *= -1  # the cube mirrored: J < 0
+    ev = evaluate(el, x, tangent=True, rotated_strain=1e-4, raise_on_inversion=False)
+    assert ev.energy[2] == np.inf and not ev.rotated[2]
+    assert np.all(ev.blocks[el.block_ptr[2] : el.block_ptr[3]] == 0.0)

@@ -41,7 +41,8 @@ def vem_options_from(cfg: dict) -> VemOptions:
 def solver_options_from(cfg: dict) -> SolverOptions:
     s = cfg["solver"]
     keys = ("integrator", "beta", "gamma", "dt", "dt_min", "dt_max", "max_iterations", "easy_iterations",
-            "grow_after", "freeze_cycles", "break_stick_cycles", "hold_damping_cycles", "impact_steps",
+            "grow_after", "freeze_cycles", "break_stick_cycles", "hold_damping_cycles", "rotated_tangent",
+            "impact_steps",
             "entry_fraction", "energy_growth", "safety", "mass_damping", "linear", "predictor",
             "newton_xtol")  # fmt: skip
     return SolverOptions(**{k: s[k] for k in keys})

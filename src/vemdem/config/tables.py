@@ -172,6 +172,12 @@ SOLVER = {
             "(the no-adhesion clamp at the layer's outer edge) is undamped for the rest of it (docs/dynamics.md; "
             "without it 14 Newton rejections in the first 0.04 s of the 515-grain mu 0.6/0.5 collapse, with it 1)",
     ),
+    "rotated_tangent": Field(
+        float, 1e-4, non_negative,
+        "implicit, flexible grains: a grain whose deformation gradients all lie within this strain of a rotation "
+        "takes its reference tangent rotated as Newton's matrix block (forces stay exact; 0: always the exact "
+        "tangent; docs/vem.md: a third of the element kernel's time, the same Newton iterations)",
+    ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
     ),

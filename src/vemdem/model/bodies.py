@@ -62,7 +62,8 @@ class BodyModel(Protocol):
     @property
     def n_vertices(self) -> int: ...
 
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0,
+                 rotated_strain: float = 0.0) -> Evaluation:  # fmt: skip
         ...
 
     def mass_matrix(self) -> sp.csr_matrix: ...
@@ -100,11 +101,13 @@ class VemBodies:
         return self.elements.n_vertices
 
     # ------------------------------------------------------------------ mechanics
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0,
+                 rotated_strain: float = 0.0) -> Evaluation:  # fmt: skip
         """Strain energy per grain, internal force dW/dx and the flat dense tangent blocks, of
         K_int + mass_shift M (M the consistent mass, scalar n x n per grain times I_3): the Newmark
-        matrix a1 M + K_int without a sparse sum."""
-        return evaluate(self.elements, x, force=force, tangent=tangent, mass=self.mass, mass_shift=mass_shift)
+        matrix a1 M + K_int without a sparse sum. rotated_strain: vem.element.evaluate."""
+        return evaluate(self.elements, x, force=force, tangent=tangent, mass=self.mass, mass_shift=mass_shift,
+                        rotated_strain=rotated_strain)  # fmt: skip
 
     def tangent_matrix(self, blocks: np.ndarray) -> sp.csr_matrix:
         return tangent_matrix(self.elements, blocks)

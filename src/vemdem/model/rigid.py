@@ -112,7 +112,8 @@ class RigidBodies:
         return place_vertices(centre, rotation, self.body, self.vertex_grain)
 
     # ------------------------------------------------------------------ the BodyModel protocol
-    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0) -> Evaluation:
+    def evaluate(self, x: np.ndarray, force: bool = True, tangent: bool = False, mass_shift: float = 0.0,
+                 rotated_strain: float = 0.0) -> Evaluation:  # fmt: skip
         """No strain energy, no internal force: the grains do not deform."""
         if tangent and mass_shift != 0.0:
             raise NotImplementedError("rigid grains have no vertex mass blocks: "

@@ -44,6 +44,8 @@ class SolverOptions:
     break_stick_cycles: bool = True
     # implicit flexible: pairs whose damping Newton switches on and off 3 times in a step go on undamped
     hold_damping_cycles: bool = True
+    # implicit flexible: the strain below which a grain's Newton block is its reference tangent rotated
+    rotated_tangent: float = 1e-4
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -96,7 +98,8 @@ class ImplicitNewmark:
                                         linear=make_linear_solver(options.linear),
                                         freeze_cycles=options.freeze_cycles,
                                         break_stick_cycles=options.break_stick_cycles,
-                                        hold_damping_cycles=options.hold_damping_cycles)  # fmt: skip
+                                        hold_damping_cycles=options.hold_damping_cycles,
+                                        rotated_tangent=options.rotated_tangent)  # fmt: skip
         # Newton's iterates move grains a fraction of a gap between narrow phases (one per iteration):
         # on the 515-grain collapse the list takes the narrow phase from 23 to 8.5 ms per Newton
         # iteration, the same records (docs/contact.md)

@@ -25,7 +25,7 @@ from numba import njit, prange
 
 from ..geometry.polyhedron import Polyhedron
 from ..geometry.submesh import SubMesh, augmented_points, build_submesh
-from .material import Material, det3, neo_hooke
+from .material import Material, det3, inv3, neo_hooke
 from .projection import projection_gradients, projection_shape_functions
 
 
@@ -149,12 +149,133 @@ def build_elements(
     )
 
 
+@njit(cache=True)
+def _polar_rotation(ua, v0, nv, projection_grads, R):
+    """R of the polar decomposition F_Pi = R U (F_Pi = I + sum_v u_v (x) g_v), by Higham's iteration
+    R <- (R + R^-T) / 2, quadratic from F_Pi: two or three sweeps for the strains of stiff grains.
+    False where F_Pi is inverted or the iteration does not settle."""
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = 1.0 if i == j else 0.0
+    for v in range(nv):
+        for i in range(3):
+            for j in range(3):
+                R[i, j] += ua[v, i] * projection_grads[v0 + v, j]
+    for _ in range(30):
+        J = det3(R)
+        if not (J > 0.0):
+            return False
+        Ri = inv3(R, J)
+        change = 0.0
+        for i in range(3):
+            for j in range(3):
+                r = 0.5 * (R[i, j] + Ri[j, i])
+                change = max(change, abs(r - R[i, j]))
+                R[i, j] = r
+        if change <= 1e-15:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu, kappa,
+               want_force, want_tangent, R, fa, Ka, AG):  # fmt: skip
+    """Energy of pieces p0:p1 of one grain, their forces added to fa and (want_tangent) their tangent
+    to Ka. Returns (energy, deviation): +inf energy where a piece is inverted; deviation = the largest
+    |F - R|_ij over the pieces when R is given (R.shape[0] == 3), how far they are from R's rotation."""
+    F = np.empty((3, 3))
+    P = np.empty((3, 3))
+    A = np.empty((9, 9))
+    kab = np.empty((3, 3))
+    e = 0.0
+    deviation = 0.0
+    for p in range(p0, p1):
+        q0 = piece_node_ptr[p]
+        q1 = piece_node_ptr[p + 1]
+        F[:, :] = 0.0
+        for i in range(3):
+            F[i, i] = 1.0
+        for q in range(q0, q1):
+            a = piece_nodes[q]
+            for i in range(3):
+                for I in range(3):
+                    F[i, I] += ua[a, i] * piece_grads[q, I]
+        if R.shape[0] == 3:
+            for i in range(3):
+                for I in range(3):
+                    deviation = max(deviation, abs(F[i, I] - R[i, I]))
+        psi = neo_hooke(F, mu, kappa, want_tangent, P, A)
+        if psi == np.inf:
+            return np.inf, deviation
+        c = piece_weight[p]
+        e += c * psi
+        if want_force:
+            for q in range(q0, q1):
+                a = piece_nodes[q]
+                for i in range(3):
+                    s = 0.0
+                    for I in range(3):
+                        s += P[i, I] * piece_grads[q, I]
+                    fa[a, i] += c * s
+        if want_tangent:
+            # AG_b[iI, j] = sum_K A[iI, jK] b_b[K], then K_ab[i, j] = c sum_I b_a[I] AG_b[iI, j]
+            for qb in range(q0, q1):
+                r = qb - q0
+                for row in range(9):
+                    for j in range(3):
+                        s = 0.0
+                        for K in range(3):
+                            s += A[row, 3 * j + K] * piece_grads[qb, K]
+                        AG[r, row, j] = s
+            # A has major symmetry, so K_ba = K_ab^T: compute the pairs qb >= qa only and mirror
+            # (half the multiplications of the plain double loop).
+            for qa in range(q0, q1):
+                a = piece_nodes[qa]
+                ba0 = c * piece_grads[qa, 0]
+                ba1 = c * piece_grads[qa, 1]
+                ba2 = c * piece_grads[qa, 2]
+                for qb in range(qa, q1):
+                    b = piece_nodes[qb]
+                    r = qb - q0
+                    for i in range(3):
+                        for j in range(3):
+                            kab[i, j] = ba0 * AG[r, 3 * i, j] + ba1 * AG[r, 3 * i + 1, j] + ba2 * AG[r, 3 * i + 2, j]
+                    for i in range(3):
+                        for j in range(3):
+                            Ka[3 * a + i, 3 * b + j] += kab[i, j]
+                    if qb != qa:
+                        for i in range(3):
+                            for j in range(3):
+                                Ka[3 * b + j, 3 * a + i] += kab[i, j]
+    return e, deviation
+
+
+@njit(cache=True)
+def _rotate_block(K0, R, out):
+    """out = (I (x) R) K0 (I (x) R)^T, 3 x 3 sub-block by sub-block: R K0_ab R^T. The rows are
+    combined first with unit-stride inner loops, then each row's triples."""
+    n3 = K0.shape[0]
+    W = np.empty((3, n3))
+    for a in range(n3 // 3):
+        for i in range(3):
+            r0, r1, r2 = R[i, 0], R[i, 1], R[i, 2]
+            for c in range(n3):
+                W[i, c] = r0 * K0[3 * a, c] + r1 * K0[3 * a + 1, c] + r2 * K0[3 * a + 2, c]
+        for i in range(3):
+            row = out[3 * a + i]
+            for b in range(n3 // 3):
+                w0, w1, w2 = W[i, 3 * b], W[i, 3 * b + 1], W[i, 3 * b + 2]
+                row[3 * b] = w0 * R[0, 0] + w1 * R[0, 1] + w2 * R[0, 2]
+                row[3 * b + 1] = w0 * R[1, 0] + w1 * R[1, 1] + w2 * R[1, 2]
+                row[3 * b + 2] = w0 * R[2, 0] + w1 * R[2, 1] + w2 * R[2, 2]
+
+
 @njit(parallel=True, cache=True)
 def _evaluate_grains(
     x, X, vertex_ptr, virtual_ptr, virtual_weight_ptr, virtual_weights,
     piece_ptr, piece_weight, piece_node_ptr, piece_nodes, piece_grads,
     mu, kappa, block_ptr, want_force, want_tangent, energy, force, blocks, inverted,
-    mass_blocks, mass_ptr, mass_shift,
+    mass_blocks, mass_ptr, mass_shift, projection_grads, reference_blocks, rotated_strain, rotated,
 ):  # fmt: skip
     n_grains = len(vertex_ptr) - 1
     for g in prange(n_grains):
@@ -174,71 +295,31 @@ def _evaluate_grains(
                 for i in range(3):
                     ua[nv + k, i] += T[k, v] * ua[v, i]
         fa = np.zeros((na, 3))
-        Ka = np.zeros((3 * na, 3 * na)) if want_tangent else np.zeros((1, 1))
-        AG = np.zeros((na, 9, 3)) if want_tangent else np.zeros((1, 9, 3))
-        F = np.empty((3, 3))
-        P = np.empty((3, 3))
-        A = np.empty((9, 9))
-        kab = np.empty((3, 3))
+        p0, p1 = piece_ptr[g], piece_ptr[g + 1]
+        # A grain whose every piece stays within rotated_strain of its projection's rotation R takes
+        # its tangent as the reference one rotated by R (docs/vem.md, "The rotated tangent"). Each
+        # array is assigned once: numba's parallel loop lowering mixed up a block reassigned in a branch.
+        R = np.empty((3, 3))
+        near_rigid = False
         e = 0.0
-        for p in range(piece_ptr[g], piece_ptr[g + 1]):
-            q0 = piece_node_ptr[p]
-            q1 = piece_node_ptr[p + 1]
-            F[:, :] = 0.0
-            for i in range(3):
-                F[i, i] = 1.0
-            for q in range(q0, q1):
-                a = piece_nodes[q]
-                for i in range(3):
-                    for I in range(3):
-                        F[i, I] += ua[a, i] * piece_grads[q, I]
-            psi = neo_hooke(F, mu[g], kappa[g], want_tangent, P, A)
-            if psi == np.inf:
-                inverted[g] = True
-                e = np.inf
-                break
-            c = piece_weight[p]
-            e += c * psi
-            if want_force:
-                for q in range(q0, q1):
-                    a = piece_nodes[q]
+        if want_tangent and rotated_strain > 0.0 and _polar_rotation(ua, v0, nv, projection_grads, R):
+            e, deviation = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g],
+                                      kappa[g], want_force, False, R, fa, np.zeros((1, 1)), np.zeros((1, 9, 3)))  # fmt: skip
+            near_rigid = e < np.inf and deviation <= rotated_strain
+            if not near_rigid:  # strained (or inverted): the exact tangent after all
+                for a in range(na):
                     for i in range(3):
-                        s = 0.0
-                        for I in range(3):
-                            s += P[i, I] * piece_grads[q, I]
-                        fa[a, i] += c * s
-            if want_tangent:
-                # AG_b[iI, j] = sum_K A[iI, jK] b_b[K], then K_ab[i, j] = c sum_I b_a[I] AG_b[iI, j]
-                for qb in range(q0, q1):
-                    r = qb - q0
-                    for row in range(9):
-                        for j in range(3):
-                            s = 0.0
-                            for K in range(3):
-                                s += A[row, 3 * j + K] * piece_grads[qb, K]
-                            AG[r, row, j] = s
-                # A has major symmetry, so K_ba = K_ab^T: compute the pairs qb >= qa only and mirror
-                # (half the multiplications of the plain double loop).
-                for qa in range(q0, q1):
-                    a = piece_nodes[qa]
-                    ba0 = c * piece_grads[qa, 0]
-                    ba1 = c * piece_grads[qa, 1]
-                    ba2 = c * piece_grads[qa, 2]
-                    for qb in range(qa, q1):
-                        b = piece_nodes[qb]
-                        r = qb - q0
-                        for i in range(3):
-                            for j in range(3):
-                                kab[i, j] = ba0 * AG[r, 3 * i, j] + ba1 * AG[r, 3 * i + 1, j] + ba2 * AG[r, 3 * i + 2, j]
-                        for i in range(3):
-                            for j in range(3):
-                                Ka[3 * a + i, 3 * b + j] += kab[i, j]
-                        if qb != qa:
-                            for i in range(3):
-                                for j in range(3):
-                                    Ka[3 * b + j, 3 * a + i] += kab[i, j]
+                        fa[a, i] = 0.0
+        exact = want_tangent and not near_rigid
+        Ka = np.zeros((3 * na, 3 * na)) if exact else np.zeros((1, 1))
+        if not near_rigid:
+            AG = np.zeros((na, 9, 3)) if exact else np.zeros((1, 9, 3))
+            e, _ = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g], kappa[g],
+                              want_force, exact, np.empty((0, 0)), fa, Ka, AG)  # fmt: skip
+        rotated[g] = near_rigid
         energy[g] = e
-        if inverted[g]:
+        if e == np.inf:
+            inverted[g] = True
             if want_tangent:  # not left as np.empty's garbage (an element loop: numba compiles a
                 for k in range(block_ptr[g], block_ptr[g + 1]):  # slice assignment's error path for seconds)
                     blocks[k] = 0.0
@@ -252,7 +333,10 @@ def _evaluate_grains(
                     force[v0 + v, i] = s
         if want_tangent:
             out = blocks[block_ptr[g] : block_ptr[g + 1]].reshape(3 * nv, 3 * nv)
-            _condense_tangent(Ka, T, nv, nk, out)
+            if near_rigid:
+                _rotate_block(reference_blocks[block_ptr[g] : block_ptr[g + 1]].reshape(3 * nv, 3 * nv), R, out)
+            else:
+                _condense_tangent(Ka, T, nv, nk, out)
             if mass_shift != 0.0:
                 _add_mass(out, mass_blocks[mass_ptr[g] : mass_ptr[g + 1]], nv, mass_shift)
 
@@ -319,6 +403,7 @@ class Evaluation:
     energy: np.ndarray  # (G,) strain energy of each grain
     force: np.ndarray | None  # (N, 3) internal force dW/dx
     blocks: np.ndarray | None  # flat dense tangent blocks (see GrainElements.block_ptr)
+    rotated: np.ndarray | None = None  # (G,) bool: the grain's block is its reference block rotated
 
     @property
     def total_energy(self) -> float:
@@ -326,12 +411,19 @@ class Evaluation:
 
 
 def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent: bool = False,
-             raise_on_inversion: bool = True, mass=None, mass_shift: float = 0.0) -> Evaluation:  # fmt: skip
+             raise_on_inversion: bool = True, mass=None, mass_shift: float = 0.0,
+             rotated_strain: float = 0.0) -> Evaluation:  # fmt: skip
     """Strain energy, internal forces and tangent blocks at current vertex positions x (N, 3).
 
     With `mass` (a vem.mass.GrainMass) and mass_shift, the blocks are those of K_int + mass_shift M,
     the Newmark matrix's grain part: each grain's mass is added while its block is in cache (a
-    separate pass over the 33 MB of the 515-grain blocks cost 5-6 ms per Newton iteration)."""
+    separate pass over the 33 MB of the 515-grain blocks cost 5-6 ms per Newton iteration).
+
+    rotated_strain > 0: a grain whose pieces' deformation gradients all lie within rotated_strain
+    (entrywise) of R, the rotation of its projection's F_Pi = R U, gets the tangent block of its
+    reference configuration rotated by R, (I (x) R) K(X) (I (x) R)^T: exact for a rigid motion, off by
+    O(rotated_strain) relative otherwise, a sixth of the cost (docs/vem.md, "The rotated tangent").
+    Energy and forces are always exact; only Newton's matrix is approximated."""
     x = np.ascontiguousarray(x, dtype=np.float64)
     G = elements.n_grains
     energy = np.zeros(G)
@@ -342,18 +434,31 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
         mass_blocks, mass_ptr, mass_shift = np.zeros(1), np.zeros(G + 1, np.int64), 0.0
     else:
         mass_blocks, mass_ptr = mass.blocks, mass.block_ptr
+    rotated = np.zeros(G, dtype=np.bool_)
+    rotated_strain = float(rotated_strain) if tangent else 0.0
+    reference_blocks = reference_tangent(elements) if rotated_strain > 0.0 else np.zeros(1)
     _evaluate_grains(
         x, elements.reference, elements.vertex_ptr, elements.virtual_ptr, elements.virtual_weight_ptr, elements.virtual_weights,
         elements.piece_ptr, elements.piece_weight, elements.piece_node_ptr, elements.piece_nodes,
         elements.piece_grads, elements.mu, elements.kappa, elements.block_ptr, force, tangent,
         energy, f, blocks, inverted, mass_blocks, mass_ptr, float(mass_shift),
+        elements.projection_grads, reference_blocks, rotated_strain, rotated,
     )  # fmt: skip
     if raise_on_inversion and inverted.any():
         bad = np.flatnonzero(inverted)
         raise InvertedElementError(
             f"inverted element (J <= 0) in grain {bad[:10].tolist()}: the deformation is not admissible"
         )
-    return Evaluation(energy, f if force else None, blocks if tangent else None)
+    return Evaluation(energy, f if force else None, blocks if tangent else None, rotated if tangent else None)
+
+
+def reference_tangent(elements: GrainElements) -> np.ndarray:
+    """The flat tangent blocks K(X) at the reference configuration, made once (cached on the object)."""
+    cached = getattr(elements, "_reference_tangent", None)
+    if cached is None:
+        cached = evaluate(elements, elements.reference, force=False, tangent=True).blocks
+        object.__setattr__(elements, "_reference_tangent", cached)
+    return cached
 
 
 def tangent_matrix(elements: GrainElements, blocks: np.ndarray) -> sp.csr_matrix:
