@@ -304,7 +304,8 @@ def _evaluate_grains(
         e = 0.0
         if want_tangent and rotated_strain > 0.0 and _polar_rotation(ua, v0, nv, projection_grads, R):
             e, deviation = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g],
-                                      kappa[g], want_force, False, R, fa, np.zeros((1, 1)), np.zeros((1, 9, 3)))  # fmt: skip
+                                      kappa[g], want_force, False, R, fa, np.zeros((1, 1)),
+                                      np.zeros((1, 9, 3)))  # fmt: skip
             near_rigid = e < np.inf and deviation <= rotated_strain
             if not near_rigid:  # strained (or inverted): the exact tangent after all
                 for a in range(na):
