@@ -108,3 +108,25 @@ def test_the_rotated_tangent_leaves_the_motion_and_the_newton_iterations(monkeyp
     moved = np.abs(x0 - scene.bodies.reference).max()
     assert moved > 1e-7
     assert np.abs(x1 - x0).max() <= 1e-6 * moved
+
+
+def test_the_summary_counts_the_rotated_and_the_exact_blocks(tmp_path):
+    """summary.json names the approximation: Newton's grain blocks, and those of the exact tangent."""
+    import json
+    import tomllib
+
+    from vemdem.scenarios import scene as scene_mod
+    from vemdem.scenarios.registry import checked_config, example_text
+
+    for strain, folder in ((1e-4, "rotated"), (0.0, "exact")):
+        raw = tomllib.loads(example_text("drop"))
+        raw["duration"] = 0.002
+        raw["output"] = {"every": 1e-3, "vtk": False}
+        raw["solver"]["rotated_tangent"] = strain
+        cfg, _ = checked_config(raw)
+        scene_mod.run(cfg, tmp_path / folder)
+    rotated, exact = (json.loads((tmp_path / f / "summary.json").read_text()) for f in ("rotated", "exact"))
+    for run in (rotated, exact):
+        assert run["n_tangent_blocks"] == 2 * run["n_newton_iterations"] > 0  # two grains in each Newton matrix
+    assert rotated["n_exact_tangent_blocks"] == 0  # a falling grain at E = 90 GPa strains far less than 1e-4
+    assert exact["n_exact_tangent_blocks"] == exact["n_tangent_blocks"]

@@ -62,7 +62,8 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              choices=json.dumps(identity.choices, sort_keys=True, default=str),
              rejections=json.dumps(stats.rejections), energy_gains=stats.energy_gains,
              frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps,
-             damping_hold_steps=stats.damping_hold_steps,
+             damping_hold_steps=stats.damping_hold_steps, tangent_blocks=stats.tangent_blocks,
+             exact_tangent_blocks=stats.exact_tangent_blocks,
              carried=json.dumps(carried or {}, sort_keys=True), **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
@@ -118,6 +119,9 @@ def _run_stats(d) -> RunStats:
         stats.stick_break_steps = int(d["stick_break_steps"])
     if "damping_hold_steps" in d.files:  # checkpoints before session 33 have none
         stats.damping_hold_steps = int(d["damping_hold_steps"])
+    if "tangent_blocks" in d.files:  # checkpoints before session 34 have none
+        stats.tangent_blocks = int(d["tangent_blocks"])
+        stats.exact_tangent_blocks = int(d["exact_tangent_blocks"])
     return stats
 
 

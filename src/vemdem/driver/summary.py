@@ -113,6 +113,10 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_stick_break_steps": stats.stick_break_steps,
         # implicit: steps with pairs undamped after cycles on the damping's clamp (hold_damping_cycles)
         "n_damping_hold_steps": stats.damping_hold_steps,
+        # implicit: grain blocks of Newton's matrices, and those of the exact element tangent (the rest were
+        # reference tangents rotated: solver.rotated_tangent, docs/vem.md)
+        "n_tangent_blocks": stats.tangent_blocks,
+        "n_exact_tangent_blocks": stats.exact_tangent_blocks,
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,

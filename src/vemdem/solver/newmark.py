@@ -348,6 +348,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     damping = _DampingFlips() if params.hold_damping_cycles else None
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
+    tangent_blocks = exact_blocks = 0
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
         acc = a1 * du - a2 * state.v - a3 * state.a
@@ -360,6 +361,9 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
                                   undamped=None if damping is None else damping.broken)  # fmt: skip
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
+        if el.rotated is not None:
+            tangent_blocks += len(el.rotated)
+            exact_blocks += len(el.rotated) - int(np.count_nonzero(el.rotated))
         if params.freeze_cycles and tw == t1:
             frozen = _freeze_cycling(key_trail, cr.ints, cr.floats, frozen)
         if flips is not None:
@@ -446,7 +450,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     new = State(t1, x, vel, acc, cr.trial_history, state.dissipated + 0.5 * dt * (state.power + power), power)
     info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
                     0 if frozen is None else len(frozen.keys), 0 if flips is None else len(flips.broken),
-                    0 if damping is None else len(damping.broken))  # fmt: skip
+                    0 if damping is None else len(damping.broken), tangent_blocks, exact_blocks)  # fmt: skip
     return new, info
 
 
@@ -652,6 +656,8 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
         stats.frozen_pair_steps += info.frozen_pairs > 0
         stats.stick_break_steps += info.broken_pairs > 0
         stats.damping_hold_steps += info.undamped_pairs > 0
+        stats.tangent_blocks += info.tangent_blocks
+        stats.exact_tangent_blocks += info.exact_blocks
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)

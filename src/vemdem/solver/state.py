@@ -54,6 +54,8 @@ class StepInfo:
     frozen_pairs: int = 0  # implicit: pairs Newton kept in its set for cycling (NewmarkParameters.freeze_cycles)
     broken_pairs: int = 0  # implicit: pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
     undamped_pairs: int = 0  # implicit: pairs undamped after cycles on the damping's clamp (hold_damping_cycles)
+    tangent_blocks: int = 0  # implicit: grain blocks of the step's Newton matrices
+    exact_blocks: int = 0  # implicit: of those, the exact element tangent's (not rotated: rotated_tangent)
 
 
 @dataclass
@@ -86,6 +88,8 @@ class RunStats:
     frozen_pair_steps: int = 0  # implicit: steps that converged with cycling pairs kept (freeze_cycles)
     stick_break_steps: int = 0  # implicit: steps with pairs judged by mu_d after stick-slip cycles (break_stick_cycles)
     damping_hold_steps: int = 0  # implicit: steps with pairs undamped after cycles on the damping's clamp
+    tangent_blocks: int = 0  # implicit: grain blocks of the accepted steps' Newton matrices
+    exact_tangent_blocks: int = 0  # implicit: of those, the exact element tangent's (rotated_tangent)
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
     def reject(self, exc: BaseException) -> None:
