@@ -423,7 +423,7 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
     rotated_strain > 0: a grain whose pieces' deformation gradients all lie within rotated_strain
     (entrywise) of R, the rotation of its projection's F_Pi = R U, gets the tangent block of its
     reference configuration rotated by R, (I (x) R) K(X) (I (x) R)^T: exact for a rigid motion, off by
-    O(rotated_strain) relative otherwise, a sixth of the cost (docs/vem.md, "The rotated tangent").
+    O(rotated_strain) relative otherwise, a third of the cost (docs/vem.md, "The rotated tangent").
     Energy and forces are always exact; only Newton's matrix is approximated."""
     x = np.ascontiguousarray(x, dtype=np.float64)
     G = elements.n_grains
