@@ -300,23 +300,20 @@ def _evaluate_grains(
         # its tangent as the reference one rotated by R (docs/vem.md, "The rotated tangent"). Each
         # array is assigned once: numba's parallel loop lowering mixed up a block reassigned in a branch.
         R = np.empty((3, 3))
-        near_rigid = False
+        checked = near_rigid = False
         e = 0.0
         if want_tangent and rotated_strain > 0.0 and _polar_rotation(ua, v0, nv, projection_grads, R):
+            checked = True
             e, deviation = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g],
                                       kappa[g], want_force, False, R, fa, np.zeros((1, 1)),
                                       np.zeros((1, 9, 3)))  # fmt: skip
             near_rigid = e < np.inf and deviation <= rotated_strain
-            if not near_rigid:  # strained (or inverted): the exact tangent after all
-                for a in range(na):
-                    for i in range(3):
-                        fa[a, i] = 0.0
         exact = want_tangent and not near_rigid
         Ka = np.zeros((3 * na, 3 * na)) if exact else np.zeros((1, 1))
-        if not near_rigid:
+        if not near_rigid:  # strained (or inverted) grains too: the forces of the check's pass stand
             AG = np.zeros((na, 9, 3)) if exact else np.zeros((1, 9, 3))
             e, _ = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g], kappa[g],
-                              want_force, exact, np.empty((0, 0)), fa, Ka, AG)  # fmt: skip
+                              want_force and not checked, exact, np.empty((0, 0)), fa, Ka, AG)  # fmt: skip
         rotated[g] = near_rigid
         energy[g] = e
         if e == np.inf:
