@@ -1,0 +1,48 @@
+"""benchmarks/bench_paper.py builds its runs from the examples: the mass-scaled ones by default, the
+real-density implicit ones with --implicit (issue 14: every 515-grain real-density run's wall time
+from a benchmark anyone can rerun)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_paper.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_paper", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("implicit", [False, True])
+def test_each_run_is_its_example_in_the_chosen_integrator(bench, tmp_path, implicit):
+    pack = tmp_path / "elsewhere" / "state.npz"
+    for name in bench.RUNS:
+        cfg, module = bench.config_for(name, tmp_path, None, implicit=implicit, pack_state=pack, vtk=False)
+        solver = cfg["solver"]
+        assert solver["integrator"] == ("implicit" if implicit else "explicit"), name
+        assert (solver["mass_scaling"] == 1.0) == implicit, name
+        assert cfg["output"]["vtk"] is False, name
+        if name in ("high", "mid", "low", "compression-pack"):
+            assert Path(cfg["initial_state"]) == pack.resolve(), name
+        else:
+            assert not cfg.get("initial_state"), name
+
+
+def test_the_collapses_start_from_the_runs_own_pack_by_default(bench, tmp_path):
+    cfg, _ = bench.config_for("mid", tmp_path, None, implicit=True)
+    assert Path(cfg["initial_state"]) == tmp_path / "pack" / "state.npz"
+    assert cfg["output"]["vtk"] is True  # the example's own choice unless --no-vtk
+
+
+def test_a_missing_pack_state_is_refused_in_one_line(bench, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(["--implicit", "--only", "mid", "--pack-state", str(tmp_path / "none.npz"), "--out", str(tmp_path)])
+    assert exit_.value.code == 2
+    assert "--pack-state: no file" in capsys.readouterr().err
