@@ -221,3 +221,53 @@ def test_a_grain_loaded_but_undeformed_keeps_the_search_local(monkeypatch):
     assert np.abs(start.a).max() > 1e6  # the vibration is there
     newmark_step(scene, start, 1e-5, NewmarkParameters())
     assert margins and max(margins) < 1.5 * scene.contact.law.activation_gap
+
+
+@pytest.mark.parametrize("share, gain, rejected", [(0.0, 0.1, True), (0.2, 0.1, False), (0.2, 0.5, True)])
+def test_a_share_of_the_walls_work_widens_the_guard(share, gain, rejected, monkeypatch):
+    """`energy_wall_share`: a step may gain that share of the work the moving walls did in it on top
+    of energy_growth W d. A lid pressing a cube: a first step made to gain `gain` times the lid's
+    work (an integration error of that step alone) is rejected without the share, accepted within
+    it, and rejected beyond it."""
+    import dataclasses
+
+    import vemdem.solver.newmark as newmark
+
+    law, _ = default_contact_laws(SIZE, STIFF.E, STIFF.density)
+    scene = lid_scene(cube(SIZE), 0.3 * law.activation_gap, speed=0.1)
+    control = StepControl(dt=1e-5, dt_max=1e-5, dt_min=1e-12, energy_wall_share=share)
+    start = initial_state(scene)
+    real_step = newmark.newmark_step
+    works, starts = [], []
+
+    def step_with_a_gain(scene_, state, h, params):
+        new, info = real_step(scene_, state, h, params)
+        starts.append(state)
+        if len(starts) == 1:
+            work = scene.contact.wall_work(state.t, new.t, newmark._wall_reactions_at(scene, state), info.wall_reactions)
+            own = total_energy(scene, new, info.strain_energy, info.contact_energy) - newmark._energy_of(scene, state)
+            works.append(work)
+            info = dataclasses.replace(info, contact_energy=info.contact_energy + gain * abs(work) - (own - work))
+        return new, info
+
+    monkeypatch.setattr(newmark, "newmark_step", step_with_a_gain)
+    advance(scene, start, 2e-5, control, NewmarkParameters(), stats=RunStats())
+    assert works[0] > 100 * newmark.energy_tolerance(scene, control)  # the lid works on the cube: the share decides
+    assert (starts[1] is start) == rejected  # the second attempt starts where the first did: it was rejected
+
+
+def test_without_moving_walls_the_share_allows_nothing(monkeypatch):
+    """The cube thrown at the floor of test_a_wall_far_away... without the moving wall: the same
+    steps and rejections with and without a share of the (zero) walls' work."""
+    runs = []
+    for share in (0.0, 0.5):
+        scene = lid_scene(cube(SIZE), 5 * SIZE, speed=0.0, height=0.3 * SIZE, damping_ratio=0.0)
+        control = StepControl(dt=1e-4, dt_max=1e-4, dt_min=1e-12, energy_wall_share=share)
+        v0 = np.zeros_like(scene.bodies.reference)
+        v0[:, 2] = -0.5
+        end, stats = advance(scene, initial_state(scene, v0=v0), 0.01, control, NewmarkParameters(0.25, 0.5),
+                             stats=RunStats())  # fmt: skip
+        runs.append((stats.accepted, dict(stats.rejections), end.x))
+    assert runs[0][1].get("energy", 0) > 0
+    assert runs[0][:2] == runs[1][:2]
+    np.testing.assert_array_equal(runs[0][2], runs[1][2])
