@@ -190,11 +190,6 @@ SOLVER = {
         "W: the grains' weight, or the load the walls carry where larger, up to the weight the contact law "
         "was made for: docs/dynamics.md)",
     ),
-    "energy_wall_share": Field(
-        float, 0.0, non_negative,
-        "implicit: the energy guard also lets a step gain this share of the work the moving walls did in it "
-        "(0: energy_growth alone; docs/dynamics.md)",
-    ),
     "safety": Field(float, 0.5, _in(0, 1, lo_open=True), "explicit: share of the critical step taken"),
     "mass_damping": Field(float, 0.0, non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
     "mass_scaling": Field(

@@ -49,7 +49,6 @@ class SolverOptions:
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
-    energy_wall_share: float = 0.0  # implicit flexible: the guard's allowance per unit of the walls' work (StepControl)
     safety: float = 0.5
     mass_damping: float = 0.0
     linear: str = "auto"  # implicit: linear solver of the Newton systems (solver/linear/)
@@ -187,7 +186,6 @@ class RigidImplicit(RigidCentral):
 def _control(o: SolverOptions) -> StepControl:
     return StepControl(dt=o.dt, dt_min=o.dt_min, dt_max=o.dt_max, impact_steps=o.impact_steps,
                        entry_fraction=o.entry_fraction, energy_growth=o.energy_growth,
-                       energy_wall_share=o.energy_wall_share,
                        easy_iterations=o.easy_iterations, grow_after=o.grow_after)  # fmt: skip
 
 

@@ -627,9 +627,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
                 # a moving wall (the lid) works on the grains: the energy may grow by that work and
                 # no more (the 515-grain lid jam, unchecked, gained 1e-6-5e-4 J per step against
                 # the lid's 1e-7 J: docs/dynamics.md "Energy never grows")
-                work = scene.contact.wall_work(state.t, new.t, reactions, info.wall_reactions)
-                gain = new_energy - energy - work
-                tolerance += control.energy_wall_share * abs(work)
+                gain = new_energy - energy - scene.contact.wall_work(state.t, new.t, reactions, info.wall_reactions)
                 if gain > tolerance:
                     # a gain that halving the step did not shrink is no integration error but a jump
                     # of the contact potential (a record of the pair hierarchy joining inside the

@@ -75,7 +75,6 @@ class StepControl:
     impact_steps: float = 0.0  # > 0: contact-impact step control on (formulation.md 5, contact.ccd)
     entry_fraction: float = 0.05  # implicit: share of the activation gap an approaching pair may close per step
     energy_growth: float = 1e-3  # implicit: largest energy gain of a step, in sum m g d (0: off; newmark.advance)
-    energy_wall_share: float = 0.0  # implicit: and this share of the moving walls' work in the step on top
 
 
 @dataclass
