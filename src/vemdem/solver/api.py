@@ -112,7 +112,7 @@ class ImplicitNewmark:
         return self.params.linear.stats
 
     def initial_state(self, x0=None, v0=None, history=None) -> State:
-        return initial_state(self.scene, x0=x0, v0=v0, history=history)
+        return initial_state(self.scene, x0=x0, v0=v0, history=history, mass_damping=self.params.mass_damping)
 
     def advance(self, state, t_end, on_step, stats):
         return advance(self.scene, state, t_end, self.control, self.params, on_step, stats)
