@@ -450,8 +450,9 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     missed = missed_pairs(contact, x, t1, candidates)
     if missed:
         raise StepRejected(f"{missed} contact pairs appeared inside the activation gap during the step")
-    dissipative = cr.dissipative + params.mass_damping * (M @ vel.ravel()).reshape(-1, 3)
-    power = cr.dissipation_power + params.mass_damping * 2.0 * scene.kinetic_energy(vel)
+    mass_force = params.mass_damping * (M @ vel.ravel()).reshape(-1, 3)
+    dissipative = cr.dissipative + mass_force
+    power = cr.dissipation_power + float(np.sum(mass_force * vel))
     dissipated = state.dissipated + step_dissipation(state, dissipative, vel, power, dt, gam)
     new = State(t1, x, vel, acc, cr.trial_history, dissipated, power, {"dissipative": dissipative})
     info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
@@ -476,7 +477,7 @@ def step_dissipation(state: State, r1: np.ndarray, v1: np.ndarray, power1: float
     grains') keeps the trapezoid of the walls' work (ContactModel.wall_work). A state without r_d,n
     (the run's first, a state file's, a checkpoint from before) books the trapezoid of the powers."""
     r0 = state.bodies.get("dissipative")
-    if r0 is None or r0.shape != r1.shape:
+    if r0 is None:
         return 0.5 * dt * (state.power + power1)
     grains = 0.5 * dt * float(np.sum((state.v + v1) * ((1.0 - gamma) * r0 + gamma * r1)))
     walls = 0.5 * dt * ((state.power - float(np.sum(r0 * state.v))) + (power1 - float(np.sum(r1 * v1))))
