@@ -304,8 +304,10 @@ def _evaluate_grains(
         e = 0.0
         if want_tangent and rotated_strain > 0.0 and _polar_rotation(ua, v0, nv, projection_grads, R):
             checked = True
+            # `not want_tangent`: False typed bool; a literal False compiles _piece_sum and
+            # neo_hooke a second time (tests/test_compile_once.py on a cold cache)
             e, deviation = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g],
-                                      kappa[g], want_force, False, R, fa, np.zeros((1, 1)),
+                                      kappa[g], want_force, not want_tangent, R, fa, np.zeros((1, 1)),
                                       np.zeros((1, 9, 3)))  # fmt: skip
             near_rigid = e < np.inf and deviation <= rotated_strain
         exact = want_tangent and not near_rigid
