@@ -47,7 +47,7 @@ from .narrow import (
     VERTEX_EDGE,
     VERTEX_FACE,
     edge_edge_coords,
-    pair_weights,
+    pair_weights_into,
     vertex_edge_coord,
     vertex_face_coords,
 )
@@ -101,21 +101,20 @@ def _lcp_coords(kind, xs):
 
 
 @njit(cache=True)
-def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out):
+def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out,
+                      w0, D, wp, w, store):  # fmt: skip
     """Damping and friction residual (dPhi/dx sign: minus the force) of one pair into out (6, 3).
 
-    xs: node positions (real or complex); velocities v = v0 + a4 (xs - x0). Returns
-    (stick, slip_magnitude_limit_hit, g_t to store) evaluated on the real parts.
+    xs: node positions (real or complex); velocities v = v0 + a4 (xs - x0). Returns the stick flag
+    and writes the g_t to store into store (3,), both evaluated on the real parts. w0 (6,), D (6, 2),
+    wp (6,) and w (6,) of xs's type are the caller's scratch (`Scratch`: no allocation per pair).
 
     Written on scalar components (the same operations in the same order as the vector form
     g = sum w_i x_i, n = g / |g|, ...): numba puts every 3-vector temporary on the heap, and
     those allocations were most of this kernel's 2 us per pair."""
     nn = N_NODES[kind]
-    w0 = np.empty(6)
-    D = np.empty((6, 2))
     c0, c1 = _lcp_coords(kind, xs)
-    pair_weights(kind, 0.0, 0.0, w0, D)  # w(c) = w0 + D c
-    w = np.zeros(6, dtype=xs.dtype)
+    pair_weights_into(kind, 0.0, 0.0, w0, D, wp)  # w(c) = w0 + D c
     for i in range(6):
         w[i] = w0[i] + D[i, 0] * c0 + D[i, 1] * c1
     zero = 0.0 * xs[0, 0]
@@ -139,7 +138,7 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     f_normal = fn + f_damp
     t0, t1, t2 = zero, zero, zero  # g_t: the tangential slip since the pair's stick point
     if was_active:
-        wp = pair_weights(kind, c_prev[0], c_prev[1], w0, D)  # material points of c_prev
+        pair_weights_into(kind, c_prev[0], c_prev[1], w0, D, wp)  # material points of c_prev
         a0, a1, a2 = zero, zero, zero
         for i in range(nn):
             a0 += wp[i] * xs[i, 0]
@@ -171,32 +170,45 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     # history to store if this state converges (return map on the elastic part)
     e0, e1, e2 = fr[EPS_T] * t0, fr[EPS_T] * t1, fr[EPS_T] * t2
     elastic_norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2).real
-    store = np.empty(3)
     limit = mu * f_normal.real
     store[0], store[1], store[2] = t0.real, t1.real, t2.real
     if elastic_norm > limit and elastic_norm > 0.0:
         scale = fr[MU_D] * f_normal.real / elastic_norm
         for a in range(3):
             store[a] = store[a] * scale
-    return stick, store
+    return stick
+
+
+# Scratch arrays of one kernel chunk, handed to every pair it evaluates: numba puts each array a
+# kernel makes on the heap, and about thirty of them per pair were most of the friction tangent's
+# time (docs/results.md, "Where the time goes"). Pairs are split into PAIR_CHUNKS ranges, each one
+# task of the parallel loop with its own scratch; a pair's result does not depend on its chunk.
+PAIR_CHUNKS = 64
+VECTORS = 17  # 3-vectors of dissipative_tangent (rows of its scratch)
+
+
+@njit(cache=True)
+def _chunk(k, chunks, n):
+    return k * n // chunks, (k + 1) * n // chunks
 
 
 @njit(cache=True)
 def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force, stick_out,
-                gt_out):  # fmt: skip
-    """dissipative_force of pair c into row c of the outputs; returns its gathered node positions
-    and velocities. fr: (m, 5) friction parameters per pair (ContactModel.pair_friction)."""
+                gt_out, xs, vs, out, w0, D, wp, w, store):  # fmt: skip
+    """dissipative_force of pair c into row c of the outputs, with its node positions and
+    velocities gathered into xs and vs. fr: (m, 5) friction parameters per pair
+    (ContactModel.pair_friction)."""
     kind = ints[c, KIND]
-    xs = np.zeros((6, 3))
-    vs = np.zeros((6, 3))
-    for i in range(N_NODES[kind]):
+    for i in range(6):
         for a in range(3):
-            xs[i, a] = x[ints[c, NODE0 + i], a]
-            vs[i, a] = v[ints[c, NODE0 + i], a]
-    out = np.zeros((6, 3))
-    stick, store = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                                     law, fr[c], m_eq[c], out)  # fmt: skip
-    stick_out[c] = stick
+            if i < N_NODES[kind]:
+                xs[i, a] = x[ints[c, NODE0 + i], a]
+                vs[i, a] = v[ints[c, NODE0 + i], a]
+            else:
+                xs[i, a] = 0.0
+                vs[i, a] = 0.0
+    stick_out[c] = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
+                                     law, fr[c], m_eq[c], out, w0, D, wp, w, store)  # fmt: skip
     # element loops, not slice assignments: numba compiles those with a string-formatting error
     # path, seconds of a fresh install's first run
     for a in range(3):
@@ -204,7 +216,6 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
     for i in range(6):
         for a in range(3):
             local_force[c, i, a] = out[i, a]
-    return xs, vs
 
 
 # Two kernels rather than one with a tangent flag: numba compiles every branch of a kernel, and
@@ -214,11 +225,16 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
 def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                        stick_out, gt_out):  # fmt: skip
     """Damping + friction residual of every pair (no tangent)."""
-    for c in prange(len(ints)):  # np.int64: c is uint64 in the parallel body, a second compilation of _pair_force
-        xs, _ = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
-                            local_force, stick_out, gt_out)  # fmt: skip
-        if is_faded(ints[c, KIND], xs, law):
-            fade_dissipative(xs, law, np.int64(c), local_force)
+    n = len(ints)
+    for k in prange(PAIR_CHUNKS):
+        xs, vs, out = np.zeros((6, 3)), np.zeros((6, 3)), np.zeros((6, 3))
+        w0, D, wp, w, store = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(6), np.zeros(3)
+        lo, hi = _chunk(np.int64(k), PAIR_CHUNKS, n)  # np.int64: k is uint64 in the parallel body
+        for c in range(lo, hi):
+            _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                        stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip
+            if is_faded(ints[c, KIND], xs, law):
+                fade_dissipative(xs, law, c, local_force)
 
 
 @njit(parallel=True, cache=True)
@@ -226,24 +242,24 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
                       local_tangent, stick_out, gt_out):  # fmt: skip
     """Damping + friction residual of every pair, and its analytic Jacobian (18 x 18) added to
     local_tangent (which holds the pairs' conservative tangent: one array, not two and their sum)."""
-    for c in prange(len(ints)):
-        xs, vs = _pair_force(np.int64(c), x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq,
-                             local_force, stick_out, gt_out)  # fmt: skip
-        kind = ints[c, KIND]
-        if is_faded(kind, xs, law):  # the edge-edge fade weighs this residual and its Jacobian
-            own = np.zeros((18, 18))
-            dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
-                                m_eq[c], own)  # fmt: skip
-            fade_dissipative_tangent(xs, law, np.int64(c), local_force, own, local_tangent)
-        else:
-            dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law, fr[c],
-                                m_eq[c], local_tangent[c])  # fmt: skip
-
-
-@njit(cache=True)
-def _sub(u, a, v):
-    """u - a v for 3-vectors (numba allocates less with these than with array expressions)."""
-    return np.array([u[0] - a * v[0], u[1] - a * v[1], u[2] - a * v[2]])
+    n = len(ints)
+    for k in prange(PAIR_CHUNKS):
+        xs, vs, out = np.zeros((6, 3)), np.zeros((6, 3)), np.zeros((6, 3))
+        w0, D, wp, w, store = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(6), np.zeros(3)
+        J, vec = np.zeros((3, 2)), np.zeros((VECTORS, 3))
+        lo, hi = _chunk(np.int64(k), PAIR_CHUNKS, n)
+        for c in range(lo, hi):
+            _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
+                        stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip
+            kind = ints[c, KIND]
+            if is_faded(kind, xs, law):  # the edge-edge fade weighs this residual and its Jacobian
+                own = np.zeros((18, 18))
+                dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
+                                    fr[c], m_eq[c], own, w0, D, wp, w, J, vec)  # fmt: skip
+                fade_dissipative_tangent(xs, law, c, local_force, own, local_tangent)
+            else:
+                dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
+                                    fr[c], m_eq[c], local_tangent[c], w0, D, wp, w, J, vec)  # fmt: skip
 
 
 @njit(cache=True)
@@ -252,21 +268,32 @@ def _dot3(u, v):  # narrow._dot, inlined here by name for the reader of this ker
 
 
 @njit(cache=True)
-def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out):
+def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, out,
+                        w0, D, wp, w, J, vec):  # fmt: skip
     """d(residual)/d(x) of `dissipative_force` at xs (velocities vs there, v = vs + a4 dx), added to
     out (18, 18): row 3 i + a the residual of node i's component a, column 3 p + b node p's
-    coordinate b. Forward mode, one column per node coordinate (module docstring for dc)."""
+    coordinate b. Forward mode, one column per node coordinate (module docstring for dc).
+    w0, D, wp, w, J (3, 2) and vec (VECTORS, 3) are the caller's scratch, every 3-vector a row of
+    vec: allocations were most of this kernel's time (the 515-grain lid jam, one thread: 64 -> 23 ms
+    for 7,356 pairs when the column loop's vector temporaries were hoisted; with none left here and in
+    dissipative_force, `dissipative_terms` on 7,683 pairs 22.4 -> 14.4 ms, docs/results.md)."""
     nn = N_NODES[kind]
     m = N_COORDS[kind]
     n3 = 3 * nn
-    w0 = np.empty(6)
-    D = np.empty((6, 2))
     c0, c1 = _lcp_coords(kind, xs)
-    w = pair_weights(kind, c0, c1, w0, D)
+    pair_weights_into(kind, c0, c1, w0, D, w)
+    g, vrel, n, a_vec, gt, vt = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
+    f_try, u, force_on_a = vec[6], vec[7], vec[8]
+    dg, dv, da, dn, dgt, dvt, df_try, dft = vec[9], vec[10], vec[11], vec[12], vec[13], vec[14], vec[15], vec[16]
     # the unperturbed state, as dissipative_force computes it
-    g = np.zeros(3)
-    vrel = np.zeros(3)
-    J = np.zeros((3, 2))
+    for a in range(3):
+        g[a] = 0.0
+        vrel[a] = 0.0
+        J[a, 0] = 0.0
+        J[a, 1] = 0.0
+        a_vec[a] = 0.0
+        gt[a] = 0.0
+        dgt[a] = 0.0  # stays 0 for a pair without history
     for i in range(nn):
         for a in range(3):
             g[a] += w[i] * xs[i, a]
@@ -274,7 +301,8 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
             J[a, 0] += D[i, 0] * xs[i, a]
             J[a, 1] += D[i, 1] * xs[i, a]
     d = np.sqrt(_dot3(g, g))
-    n = g / d
+    for a in range(3):
+        n[a] = g[a] / d
     fn, k = normal_force(d, law)
     dk_dd = normal_stiffness_slope(d, law)
     gn_dot = _dot3(n, vrel)
@@ -284,46 +312,38 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
     if clamped:
         f_damp = -fn
     f_normal = fn + f_damp
-    wp = np.zeros(6)
-    a_vec = np.zeros(3)
-    gt = np.zeros(3)
+    for i in range(6):
+        wp[i] = 0.0
     if was_active:
-        wp = pair_weights(kind, c_prev[0], c_prev[1], np.empty(6), np.empty((6, 2)))
+        # the weights of c_prev; w0 and D are those of the kind, whatever the coordinates
+        pair_weights_into(kind, c_prev[0], c_prev[1], w0, D, wp)
         for i in range(nn):
             for a in range(3):
                 a_vec[a] += wp[i] * xs[i, a]
         for a in range(3):
             a_vec[a] += gt_prev[a]
-        gt = _sub(a_vec, _dot3(n, a_vec), n)
-    vt = _sub(vrel, gn_dot, n)
-    f_try = fr[EPS_T] * gt + fr[C_T] * vt
+        s = _dot3(n, a_vec)
+        for a in range(3):
+            gt[a] = a_vec[a] - s * n[a]
+    for a in range(3):
+        vt[a] = vrel[a] - gn_dot * n[a]
+    for a in range(3):
+        f_try[a] = fr[EPS_T] * gt[a] + fr[C_T] * vt[a]
     mu = fr[MU_S] if was_stick else fr[MU_D]
     f_try_norm = np.sqrt(_dot3(f_try, f_try))
     stick = f_try_norm <= mu * f_normal
-    u = f_try / f_try_norm if f_try_norm > 0.0 else np.zeros(3)
-    force_on_a = f_damp * n
-    if stick:
-        force_on_a -= f_try
-    else:
-        force_on_a -= fr[MU_D] * f_normal * u
+    for a in range(3):
+        u[a] = f_try[a] / f_try_norm if f_try_norm > 0.0 else 0.0
+        force_on_a[a] = f_damp * n[a]
+        if stick:
+            force_on_a[a] -= f_try[a]
+        else:
+            force_on_a[a] -= fr[MU_D] * f_normal * u[a]
     # (J^T J)^-1 for dc (m = 0: the vertex-vertex pair has no coordinates)
     H00 = _dot3(J[:, 0], J[:, 0])
     H01 = _dot3(J[:, 0], J[:, 1])
     H11 = _dot3(J[:, 1], J[:, 1])
     det = H00 * H11 - H01 * H01
-    # every derivative vector lives in one buffer for all 3 nn columns: an array expression in this
-    # loop allocates, and allocations were most of the kernel's time (64 -> 23 ms for the 7,356
-    # pairs of the 515-grain lid jam, one thread)
-    dc = np.zeros(2)
-    dg = np.zeros(3)
-    dv = np.zeros(3)
-    da = np.zeros(3)
-    dn = np.zeros(3)
-    dgt = np.zeros(3)  # stays 0 for a pair without history
-    dvt = np.zeros(3)
-    df_try = np.zeros(3)
-    dft = np.zeros(3)
-    dF = np.zeros(3)
     n_a = _dot3(n, a_vec)
     for col in range(n3):
         p = col // 3
@@ -331,21 +351,21 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
         r0 = D[p, 0] * g[b] + w[p] * J[b, 0]
         r1 = D[p, 1] * g[b] + w[p] * J[b, 1]
         if m == 2:
-            dc[0] = -(H11 * r0 - H01 * r1) / det
-            dc[1] = -(H00 * r1 - H01 * r0) / det
+            dc0 = -(H11 * r0 - H01 * r1) / det
+            dc1 = -(H00 * r1 - H01 * r0) / det
         elif m == 1:
-            dc[0] = -r0 / H00
-            dc[1] = 0.0
+            dc0 = -r0 / H00
+            dc1 = 0.0
         else:
-            dc[0] = 0.0
-            dc[1] = 0.0
+            dc0 = 0.0
+            dc1 = 0.0
         for a in range(3):
-            dg[a] = J[a, 0] * dc[0] + J[a, 1] * dc[1]
+            dg[a] = J[a, 0] * dc0 + J[a, 1] * dc1
             dv[a] = 0.0
         dg[b] += w[p]
         dv[b] += a4 * w[p]
         for i in range(nn):
-            dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
+            dwi = D[i, 0] * dc0 + D[i, 1] * dc1
             for a in range(3):
                 dv[a] += dwi * vs[i, a]
         dd = _dot3(n, dg)
@@ -376,12 +396,11 @@ def dissipative_tangent(kind, xs, vs, a4, c_prev, gt_prev, was_active, was_stick
             u_df = _dot3(u, df_try)
             for a in range(3):
                 dft[a] = fr[MU_D] * (df_normal * u[a] + f_normal * (df_try[a] - u_df * u[a]) / f_try_norm)
-        for a in range(3):
-            dF[a] = df_damp * n[a] + f_damp * dn[a] - dft[a]
         for i in range(nn):
-            dwi = D[i, 0] * dc[0] + D[i, 1] * dc[1]
+            dwi = D[i, 0] * dc0 + D[i, 1] * dc1
             for a in range(3):
-                out[3 * i + a, col] -= dwi * force_on_a[a] + w[i] * dF[a]
+                dFa = df_damp * n[a] + f_damp * dn[a] - dft[a]
+                out[3 * i + a, col] -= dwi * force_on_a[a] + w[i] * dFa
 
 
 @njit(parallel=True, cache=True)
@@ -402,12 +421,14 @@ def complex_step_tangent(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick,
         h = COMPLEX_STEP * max(scale, 1e-300)
         xc = np.zeros((6, 3), dtype=np.complex128)
         outc = np.zeros((6, 3), dtype=np.complex128)
+        w0, D, wp, store = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(3)
+        w = np.zeros(6, dtype=np.complex128)
         for j in range(3 * nn):
             for i in range(nn):
                 for a in range(3):
                     xc[i, a] = xs[i, a]
             xc[j // 3, j % 3] += 1j * h
             dissipative_force(kind, xc, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
-                              law, fr[c], m_eq[c], outc)  # fmt: skip
+                              law, fr[c], m_eq[c], outc, w0, D, wp, w, store)  # fmt: skip
             for r in range(3 * nn):
                 local_tangent[c, r, j] = outc[r // 3, r % 3].imag / h

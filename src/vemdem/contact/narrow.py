@@ -42,14 +42,16 @@ def _dot(a, b):
 def vertex_face_coords(p, t0, t1, t2):
     """(u, v, det): barycentric coordinates of the projection of p on the triangle's plane, for
     real or complex positions (the complex-step reference tangent of friction.py calls it too)."""
-    e1 = t1 - t0
-    e2 = t2 - t0
-    r = p - t0
-    a11 = _dot(e1, e1)
-    a12 = _dot(e1, e2)
-    a22 = _dot(e2, e2)
-    b1 = _dot(r, e1)
-    b2 = _dot(r, e2)
+    # scalar components, the same operations in the same order as with e1 = t1 - t0 and _dot:
+    # numba puts every 3-vector temporary on the heap (the friction tangent calls this per pair)
+    e10, e11, e12 = t1[0] - t0[0], t1[1] - t0[1], t1[2] - t0[2]
+    e20, e21, e22 = t2[0] - t0[0], t2[1] - t0[1], t2[2] - t0[2]
+    r0, r1, r2 = p[0] - t0[0], p[1] - t0[1], p[2] - t0[2]
+    a11 = e10 * e10 + e11 * e11 + e12 * e12
+    a12 = e10 * e20 + e11 * e21 + e12 * e22
+    a22 = e20 * e20 + e21 * e21 + e22 * e22
+    b1 = r0 * e10 + r1 * e11 + r2 * e12
+    b2 = r0 * e20 + r1 * e21 + r2 * e22
     det = a11 * a22 - a12 * a12
     return (b1 * a22 - b2 * a12) / det, (b2 * a11 - b1 * a12) / det, det
 
@@ -57,21 +59,22 @@ def vertex_face_coords(p, t0, t1, t2):
 @njit(cache=True)
 def vertex_edge_coord(p, e0, e1):
     """t of the projection of p on the line through the edge (real or complex)."""
-    d = e1 - e0
-    return _dot(p - e0, d) / _dot(d, d)
+    d0, d1, d2 = e1[0] - e0[0], e1[1] - e0[1], e1[2] - e0[2]
+    r0, r1, r2 = p[0] - e0[0], p[1] - e0[1], p[2] - e0[2]
+    return (r0 * d0 + r1 * d1 + r2 * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
 
 
 @njit(cache=True)
 def edge_edge_coords(a0, a1, b0, b1):
     """(s, t, det, aa * bb): closest points of the two lines (real or complex)."""
-    da = a1 - a0
-    db = b1 - b0
-    r = a0 - b0
-    aa = _dot(da, da)
-    bb = _dot(db, db)
-    ab = _dot(da, db)
-    ra = _dot(r, da)
-    rb = _dot(r, db)
+    da0, da1, da2 = a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2]
+    db0, db1, db2 = b1[0] - b0[0], b1[1] - b0[1], b1[2] - b0[2]
+    r0, r1, r2 = a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2]
+    aa = da0 * da0 + da1 * da1 + da2 * da2
+    bb = db0 * db0 + db1 * db1 + db2 * db2
+    ab = da0 * db0 + da1 * db1 + da2 * db2
+    ra = r0 * da0 + r1 * da1 + r2 * da2
+    rb = r0 * db0 + r1 * db1 + r2 * db2
     det = aa * bb - ab * ab
     return (ab * rb - bb * ra) / det, (aa * rb - ab * ra) / det, det, aa * bb
 
@@ -116,6 +119,14 @@ def edge_edge_lcp(a0, a1, b0, b1):
 @njit(cache=True)
 def pair_weights(kind, c0, c1, w0, D):
     """Fill w0 (6,) and D (6, 2) so that w(c) = w0 + D c for the pair kind; returns w(c)."""
+    w = np.empty(6)
+    pair_weights_into(kind, c0, c1, w0, D, w)
+    return w
+
+
+@njit(cache=True)
+def pair_weights_into(kind, c0, c1, w0, D, w):
+    """pair_weights with w(c) written into w (6,): no allocation in a kernel's per-pair loop."""
     w0[:] = 0.0
     D[:, :] = 0.0
     if kind == VERTEX_FACE:
@@ -140,10 +151,8 @@ def pair_weights(kind, c0, c1, w0, D):
     else:
         w0[0] = 1.0
         w0[1] = -1.0
-    w = np.empty(6)
     for i in range(6):
         w[i] = w0[i] + D[i, 0] * c0 + D[i, 1] * c1
-    return w
 
 
 @njit(cache=True)
