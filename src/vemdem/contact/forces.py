@@ -18,18 +18,16 @@ from numba import njit, prange
 
 from .fade import fade_conservative, fade_conservative_tangent, is_faded
 from .law import normal_force, normal_potential
-from .narrow import EDGE_EDGE, N_NODES, gap_derivatives, gap_gradient, pair_weights
-from .pairs import C0, C1, KIND, NODE0
+from .narrow import EDGE_EDGE, N_NODES, gap_derivatives_into, gap_gradient_into, pair_weights
+from .pairs import C0, C1, KIND, NODE0, PAIR_CHUNKS, chunk_range
 
 
 @njit(cache=True)
-def _pair_nodes(x, ints, c, nn):
-    """The positions of pair c's nodes, (6, 3), zero-padded."""
-    xs = np.zeros((6, 3))
-    for i in range(nn):
+def _pair_nodes(x, ints, c, nn, xs):
+    """The positions of pair c's nodes into xs (6, 3), zero-padded."""
+    for i in range(6):
         for a in range(3):
-            xs[i, a] = x[ints[c, NODE0 + i], a]
-    return xs
+            xs[i, a] = x[ints[c, NODE0 + i], a] if i < nn else 0.0
 
 
 @njit(cache=True)
@@ -43,40 +41,47 @@ def _normal_terms(c, nn, d, grad, law, energy, local_force):
     return fn, k
 
 
+# Pairs in PAIR_CHUNKS ranges, each with its own scratch (pairs.chunk_range)
 @njit(parallel=True, cache=True)
 def _local_forces(x, ints, floats, law, energy, local_force):
     """_local_terms without the tangent (explicit steps): numba compiles every branch of a
     kernel, and the tangent's would cost a fresh install's first explicit run seconds."""
-    for ci in prange(len(ints)):
-        c = np.int64(ci)  # np.int64: a prange index is uint64 in the parallel body, a second compilation of the callees
-        kind = ints[c, KIND]
-        nn = N_NODES[kind]
-        xs = _pair_nodes(x, ints, c, nn)
-        grad = np.zeros((6, 3))
-        d = gap_gradient(kind, xs, floats[c, C0], floats[c, C1], grad)
-        _normal_terms(c, nn, d, grad, law, energy, local_force)
-        if is_faded(kind, xs, law):
-            fade_conservative(xs, law, c, energy, local_force)
+    n = len(ints)
+    for k in prange(PAIR_CHUNKS):
+        xs, grad = np.zeros((6, 3)), np.zeros((6, 3))
+        w0, D, w, g = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(3)
+        lo, hi = chunk_range(np.int64(k), PAIR_CHUNKS, n)  # np.int64: k is uint64 in the parallel body
+        for c in range(lo, hi):
+            kind = ints[c, KIND]
+            nn = N_NODES[kind]
+            _pair_nodes(x, ints, c, nn, xs)
+            d = gap_gradient_into(kind, xs, floats[c, C0], floats[c, C1], grad, w0, D, w, g)
+            _normal_terms(c, nn, d, grad, law, energy, local_force)
+            if is_faded(kind, xs, law):
+                fade_conservative(xs, law, c, energy, local_force)
 
 
 @njit(parallel=True, cache=True)
 def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
     """Energy, force and 18 x 18 tangent of every pair (implicit steps)."""
-    for ci in prange(len(ints)):
-        c = np.int64(ci)  # np.int64: a prange index is uint64 in the parallel body, a second compilation of the callees
-        kind = ints[c, KIND]
-        nn = N_NODES[kind]
-        xs = _pair_nodes(x, ints, c, nn)
-        grad = np.zeros((6, 3))
-        hess = np.zeros((3 * nn, 3 * nn))
-        d = gap_derivatives(kind, xs, floats[c, C0], floats[c, C1], True, grad, hess)
-        fn, k = _normal_terms(c, nn, d, grad, law, energy, local_force)
-        for r in range(3 * nn):
-            gr = grad[r // 3, r % 3]
-            for s in range(3 * nn):
-                local_tangent[c, r, s] = k * gr * grad[s // 3, s % 3] - fn * hess[r, s]
-        if is_faded(kind, xs, law):
-            fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent)
+    n = len(ints)
+    for k in prange(PAIR_CHUNKS):
+        xs, grad, hess = np.zeros((6, 3)), np.zeros((6, 3)), np.zeros((18, 18))
+        w0, D, w, g = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(3)
+        J, B = np.zeros((3, 2)), np.zeros((3, 18))
+        lo, hi = chunk_range(np.int64(k), PAIR_CHUNKS, n)
+        for c in range(lo, hi):
+            kind = ints[c, KIND]
+            nn = N_NODES[kind]
+            _pair_nodes(x, ints, c, nn, xs)
+            d = gap_derivatives_into(kind, xs, floats[c, C0], floats[c, C1], True, grad, hess, w0, D, w, g, J, B)
+            fn, kd = _normal_terms(c, nn, d, grad, law, energy, local_force)
+            for r in range(3 * nn):
+                gr = grad[r // 3, r % 3]
+                for s in range(3 * nn):
+                    local_tangent[c, r, s] = kd * gr * grad[s // 3, s % 3] - fn * hess[r, s]
+            if is_faded(kind, xs, law):
+                fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent)
 
 
 @njit(cache=True)

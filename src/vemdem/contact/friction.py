@@ -51,7 +51,7 @@ from .narrow import (
     vertex_edge_coord,
     vertex_face_coords,
 )
-from .pairs import KIND, NODE0
+from .pairs import KIND, NODE0, PAIR_CHUNKS, chunk_range
 
 COMPLEX_STEP = 1e-30
 
@@ -179,17 +179,7 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
     return stick
 
 
-# Scratch arrays of one kernel chunk, handed to every pair it evaluates: numba puts each array a
-# kernel makes on the heap, and about thirty of them per pair were most of the friction tangent's
-# time (docs/results.md, "Where the time goes"). Pairs are split into PAIR_CHUNKS ranges, each one
-# task of the parallel loop with its own scratch; a pair's result does not depend on its chunk.
-PAIR_CHUNKS = 64
 VECTORS = 17  # 3-vectors of dissipative_tangent (rows of its scratch)
-
-
-@njit(cache=True)
-def _chunk(k, chunks, n):
-    return k * n // chunks, (k + 1) * n // chunks
 
 
 @njit(cache=True)
@@ -229,7 +219,7 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
     for k in prange(PAIR_CHUNKS):
         xs, vs, out = np.zeros((6, 3)), np.zeros((6, 3)), np.zeros((6, 3))
         w0, D, wp, w, store = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(6), np.zeros(3)
-        lo, hi = _chunk(np.int64(k), PAIR_CHUNKS, n)  # np.int64: k is uint64 in the parallel body
+        lo, hi = chunk_range(np.int64(k), PAIR_CHUNKS, n)  # np.int64: k is uint64 in the parallel body
         for c in range(lo, hi):
             _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                         stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip
@@ -247,7 +237,7 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
         xs, vs, out = np.zeros((6, 3)), np.zeros((6, 3)), np.zeros((6, 3))
         w0, D, wp, w, store = np.zeros(6), np.zeros((6, 2)), np.zeros(6), np.zeros(6), np.zeros(3)
         J, vec = np.zeros((3, 2)), np.zeros((VECTORS, 3))
-        lo, hi = _chunk(np.int64(k), PAIR_CHUNKS, n)
+        lo, hi = chunk_range(np.int64(k), PAIR_CHUNKS, n)
         for c in range(lo, hi):
             _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                         stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip

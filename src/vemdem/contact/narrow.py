@@ -156,12 +156,13 @@ def pair_weights_into(kind, c0, c1, w0, D, w):
 
 
 @njit(cache=True)
-def _gap_and_gradient(kind, xs, c0, c1, w0, D, grad):
-    """(w, g, d): the pair's weights at (c0, c1), its gap vector g = sum w_i x_i and d = |g|; grad
+def _gap_and_gradient(kind, xs, c0, c1, w0, D, w, g, grad):
+    """d = |g|: the pair's weights at (c0, c1) into w, its gap vector g = sum w_i x_i into g; grad
     d = n (x) w into grad (zeros when d = 0)."""
     nn = N_NODES[kind]
-    w = pair_weights(kind, c0, c1, w0, D)
-    g = np.zeros(3)
+    pair_weights_into(kind, c0, c1, w0, D, w)
+    for a in range(3):
+        g[a] = 0.0
     for i in range(nn):
         for a in range(3):
             g[a] += w[i] * xs[i, a]
@@ -171,19 +172,32 @@ def _gap_and_gradient(kind, xs, c0, c1, w0, D, grad):
         for i in range(nn):
             for a in range(3):
                 grad[i, a] = w[i] * g[a] / d
-    return w, g, d
+    return d
 
 
 @njit(cache=True)
 def gap_gradient(kind, xs, c0, c1, grad):
     """gap_derivatives without the Hessian: explicit steps compile only this (no LCP Schur
     complement, no matrix inverse: seconds of a fresh install's first run)."""
-    d = _gap_and_gradient(kind, xs, c0, c1, np.empty(6), np.empty((6, 2)), grad)[2]
+    return gap_gradient_into(kind, xs, c0, c1, grad, np.empty(6), np.empty((6, 2)), np.empty(6), np.empty(3))
+
+
+@njit(cache=True)
+def gap_gradient_into(kind, xs, c0, c1, grad, w0, D, w, g):
+    """gap_gradient with the caller's scratch (gap_derivatives_into)."""
+    d = _gap_and_gradient(kind, xs, c0, c1, w0, D, w, g, grad)
     return 0.0 if d <= 0.0 else d
 
 
 @njit(cache=True)
 def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
+    """gap_derivatives_into with its own scratch (tests and single pairs)."""
+    return gap_derivatives_into(kind, xs, c0, c1, want_hessian, grad, hess, np.empty(6), np.empty((6, 2)),
+                                np.empty(6), np.empty(3), np.empty((3, 2)), np.empty((3, 18)))  # fmt: skip
+
+
+@njit(cache=True)
+def gap_derivatives_into(kind, xs, c0, c1, want_hessian, grad, hess, w0, D, w, g, J, B):
     """Gap d = |g| of an in-range pair and its exact derivatives in the pair's node positions.
 
     xs (6, 3): node positions in the pair's order. Because c solves the LCP, grad d = n (x) w
@@ -192,12 +206,12 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
 
         d2q/dx2 = 2 (w w^T) (x) I,   H_cc = 2 J^T J,   d2q/dx_i dc_k = 2 (D_ik g + w_i J_k),
         hess q  = d2q/dx2 - B H_cc^-1 B^T,   hess d = hess q / (2 d) - grad q grad q^T / (4 d^3).
-    """
+
+    w0 (6,), D (6, 2), w (6,), g (3,), J (3, 2) and B (3, 18) are the caller's scratch: a kernel's
+    per-pair loop allocates nothing (numba puts every array on the heap)."""
     nn = N_NODES[kind]
     m = N_COORDS[kind]
-    w0 = np.empty(6)
-    D = np.empty((6, 2))
-    w, g, d = _gap_and_gradient(kind, xs, c0, c1, w0, D, grad)
+    d = _gap_and_gradient(kind, xs, c0, c1, w0, D, w, g, grad)
     if d <= 0.0:
         return 0.0
     if not want_hessian:
@@ -206,7 +220,9 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
     # H_cc^-1 and B H_cc^-1 B^T written out (m <= 2): np.linalg.inv and two BLAS products on 2 x 2
     # and 18 x 2 matrices cost more in calls and allocations than in flops (27 -> 9 ms for the 7,356
     # pairs of the 515-grain lid jam, one thread)
-    J = np.zeros((3, 2))  # dg/dc
+    for a in range(3):  # J = dg/dc
+        J[a, 0] = 0.0
+        J[a, 1] = 0.0
     for i in range(nn):
         for a in range(3):
             J[a, 0] += D[i, 0] * xs[i, a]
@@ -221,9 +237,11 @@ def gap_derivatives(kind, xs, c0, c1, want_hessian, grad, hess):
         i00, i01, i11 = 1.0 / h00, 0.0, 0.0
     else:
         i00, i01, i11 = 0.0, 0.0, 0.0
-    b0 = np.zeros(18)  # the columns of B = d2q/dx dc
-    b1 = np.zeros(18)
-    gq = np.zeros(18)
+    b0, b1, gq = B[0], B[1], B[2]  # the columns of B = d2q/dx dc, and grad q
+    for r in range(18):
+        b0[r] = 0.0
+        b1[r] = 0.0
+        gq[r] = 0.0
     for i in range(nn):
         for a in range(3):
             b0[3 * i + a] = 2.0 * (D[i, 0] * g[a] + w[i] * J[a, 0])

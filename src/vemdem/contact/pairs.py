@@ -42,6 +42,19 @@ INT_COLS = NODE0 + 6
 C0, C1, GAP = 0, 1, 2
 FLOAT_COLS = 3
 
+# The pair kernels (forces._local_terms, friction.dissipative_terms, ...) split the records into
+# PAIR_CHUNKS ranges, each one task of the parallel loop with its own scratch arrays: numba puts
+# every array a kernel makes on the heap, and those allocations, a dozen to thirty per pair, were
+# a third to a half of these kernels' time (docs/results.md, "Where the time goes"). A pair's
+# result does not depend on its chunk.
+PAIR_CHUNKS = 64
+
+
+@njit(cache=True)
+def chunk_range(k, chunks, n):
+    """Records lo:hi of chunk k of n records in `chunks` ranges."""
+    return k * n // chunks, (k + 1) * n // chunks
+
 
 # The three gap tests below are narrow.py's vertex_face_lcp, vertex_edge_lcp and edge_edge_lcp
 # (same formulas, same tolerances) written on scalars: the array versions allocate a 3-vector per
