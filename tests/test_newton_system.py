@@ -76,6 +76,32 @@ def test_the_coupling_triplets_become_scipys_csr_matrix():
     assert list(indptr) == [0, 2] and list(indices) == [0, 2] and list(data) == [5.0, 6.0]
 
 
+def test_node_block_triplets_give_the_scalar_triplets_matrix_to_the_bit():
+    """csr_from_block_triplets (the contact coupling as 3 x 3 node blocks) against SciPy's BSR -> CSR
+    and against the scalar triplets of the same blocks in the same order: the same pattern and,
+    duplicates summed in input order either way, the same values to the bit."""
+    import scipy.sparse as sp
+
+    from vemdem.contact.forces import csr_from_block_triplets, csr_from_triplets
+
+    rng = np.random.default_rng(5)
+    for m, n in ((0, 4), (1, 1), (50, 7), (4000, 300)):
+        rows, cols = rng.integers(0, n, m), rng.integers(0, n, m)
+        vals = rng.standard_normal((m, 3, 3))
+        indptr, indices, data = csr_from_block_triplets(rows, cols, vals, n)
+        ours = sp.csr_matrix((data, indices, indptr), shape=(3 * n, 3 * n))
+        assert ours.has_sorted_indices
+        dense = np.zeros((3 * n, 3 * n))
+        for k in range(m):
+            dense[3 * rows[k] : 3 * rows[k] + 3, 3 * cols[k] : 3 * cols[k] + 3] += vals[k]
+        np.testing.assert_allclose(ours.toarray(), dense, rtol=0, atol=1e-12)
+        a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        scalar = csr_from_triplets((3 * rows[:, None, None] + a).ravel(), (3 * cols[:, None, None] + b).ravel(),
+                                   vals.ravel(), 3 * n)  # fmt: skip
+        for ours_part, scalar_part in zip((indptr, indices, data), scalar):
+            assert np.array_equal(ours_part, scalar_part)
+
+
 def test_the_rotated_tangent_leaves_the_motion_and_the_newton_iterations(monkeypatch):
     """`rotated_tangent`: Newton's grain blocks from the reference tangent rotated (vem.element) change
     the matrix by O(strain) and the residual not at all, so the stack settles as with the exact

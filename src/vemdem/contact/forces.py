@@ -130,9 +130,9 @@ def local_tangent_matrix(ints, local_tangent, n_vertices: int) -> sp.csr_matrix:
 def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_ptr, n_vertices, blocks,
                           rows, cols, vals):  # fmt: skip
     """Add the pairs' local tangents to the grains' dense blocks (both nodes on one grain) and
-    return the count of coupling entries (nodes on two grains) written to rows, cols, vals, which
-    must hold 9 * 36 entries per pair. Wall nodes (index >= n_vertices) are prescribed: dropped.
-    Serial: pairs share grains."""
+    return the count of coupling node blocks (nodes on two grains) written to rows, cols (node
+    indices) and vals (3 x 3 each), which must hold 36 per pair. Wall nodes (index >= n_vertices)
+    are prescribed: dropped. Serial: pairs share grains."""
     m = 0
     for c in range(len(ints)):
         nn = N_NODES[ints[c, KIND]]
@@ -154,59 +154,91 @@ def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_p
                         for b in range(3):
                             blocks[b0 + (li + a) * n3 + lj + b] += local_tangent[c, 3 * i + a, 3 * j + b]
                 else:
+                    rows[m] = vi
+                    cols[m] = vj
                     for a in range(3):
                         for b in range(3):
-                            rows[m] = 3 * vi + a
-                            cols[m] = 3 * vj + b
-                            vals[m] = local_tangent[c, 3 * i + a, 3 * j + b]
-                            m += 1
+                            vals[m, a, b] = local_tangent[c, 3 * i + a, 3 * j + b]
+                    m += 1
     return m
 
 
-@njit(cache=True)
 def csr_from_triplets(rows, cols, vals, n_rows):
     """(indptr, indices, data) of the n_rows-row matrix sum_k vals[k] e_rows[k] e_cols[k]^T:
     duplicates summed, columns increasing within each row. SciPy's COO -> CSR gives the same
     matrix, but its Python layers cost 0.3 ms for 5,000 triplets (docs/linear-solvers.md), and its
     std::sort need not keep equal columns in order, so its sums of duplicates may differ from these
-    in the last bits. Here each row keeps its input order among equal columns (a stable insertion
-    sort: the coupling's rows hold tens of entries), so the sums are deterministic."""
+    in the last bits. Here each row keeps its input order among equal columns, so the sums are
+    deterministic (csr_from_block_triplets with 1 x 1 blocks)."""
+    vals = np.ascontiguousarray(vals, dtype=np.float64).reshape(-1, 1, 1)
+    return csr_from_block_triplets(np.asarray(rows, np.int64), np.asarray(cols, np.int64), vals, n_rows)
+
+
+@njit(cache=True)
+def csr_from_block_triplets(rows, cols, vals, n_block_rows):
+    """(indptr, indices, data) of the matrix sum_k vals[k] at block (rows[k], cols[k]), vals (m, b, b),
+    as a CSR matrix of b n_block_rows rows: duplicates summed in input order, columns increasing.
+
+    The contact coupling arrives as 3 x 3 node blocks: sorting the blocks' columns within each
+    node row (a stable insertion sort: the rows hold tens of blocks) is a ninth of the work of
+    sorting scalar triplets, whose rows in the 515-grain lid jam held hundreds of entries (with the
+    scatter, ContactEvaluation.add_to_blocks there 21.3 -> 7.4 ms, docs/linear-solvers.md). Every
+    scalar entry sums its duplicates in the order the scalar triplets gave them: the same matrix to
+    the bit."""
     m = len(rows)
-    start = np.zeros(n_rows + 1, np.int64)
+    bs = vals.shape[1]
+    n = n_block_rows
+    start = np.zeros(n + 1, np.int64)
     for k in range(m):
         start[rows[k] + 1] += 1
-    for i in range(n_rows):
+    for i in range(n):
         start[i + 1] += start[i]
     fill = start[:-1].copy()
     c = np.empty(m, np.int64)
-    v = np.empty(m)
+    order = np.empty(m, np.int64)
     for k in range(m):
         p = fill[rows[k]]
         c[p] = cols[k]
-        v[p] = vals[k]
+        order[p] = k
         fill[rows[k]] = p + 1
-    indptr = np.zeros(n_rows + 1, np.int64)
-    nnz = 0
-    for i in range(n_rows):
+    ucol = np.empty(m, np.int64)  # the distinct columns of each row, in order
+    first = np.empty(m + 1, np.int64)  # where each distinct column's run of duplicates starts
+    row_ptr = np.zeros(n + 1, np.int64)
+    nu = 0
+    for i in range(n):
         a, b = start[i], start[i + 1]
         for p in range(a + 1, b):  # stable insertion sort of the row by column
-            cp, vp = c[p], v[p]
+            cp, kp = c[p], order[p]
             q = p - 1
             while q >= a and c[q] > cp:
                 c[q + 1] = c[q]
-                v[q + 1] = v[q]
+                order[q + 1] = order[q]
                 q -= 1
             c[q + 1] = cp
-            v[q + 1] = vp
-        for p in range(a, b):  # merge equal columns, in place (nnz <= p)
-            if nnz > indptr[i] and c[nnz - 1] == c[p]:
-                v[nnz - 1] += v[p]
-            else:
-                c[nnz] = c[p]
-                v[nnz] = v[p]
-                nnz += 1
-        indptr[i + 1] = nnz
-    return indptr, c[:nnz].copy(), v[:nnz].copy()
+            order[q + 1] = kp
+        for p in range(a, b):
+            if p == a or c[p] != c[p - 1]:
+                ucol[nu] = c[p]
+                first[nu] = p
+                nu += 1
+        row_ptr[i + 1] = nu
+    first[nu] = m
+    indptr = np.zeros(n * bs + 1, np.int64)
+    indices = np.empty(nu * bs * bs, np.int64)
+    data = np.empty(nu * bs * bs)
+    q = 0
+    for i in range(n):
+        for a in range(bs):
+            for u in range(row_ptr[i], row_ptr[i + 1]):
+                for b in range(bs):
+                    s = vals[order[first[u]], a, b]
+                    for p in range(first[u] + 1, first[u + 1]):
+                        s += vals[order[p], a, b]
+                    indices[q] = ucol[u] * bs + b
+                    data[q] = s
+                    q += 1
+            indptr[i * bs + a + 1] = q
+    return indptr, indices, data
 
 
 def evaluate_contacts(x, ints, floats, law_params, n_vertices: int, tangent: bool = False) -> ContactEvaluation:

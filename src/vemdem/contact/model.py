@@ -23,7 +23,7 @@ from .broad import candidate_pairs, grain_boxes
 from .defaults import FORCE_MULTIPLE
 from .forces import (
     contact_points,
-    csr_from_triplets,
+    csr_from_block_triplets,
     evaluate_contacts,
     force_on_side_a,
     gap_rates,
@@ -179,14 +179,14 @@ class ContactResult:
         """Add the contact tangent's within-grain terms to the grains' dense blocks (in place) and
         return the grain-to-grain coupling as one CSR matrix: no sparse sum in Newton."""
         n = len(self.force)
-        size = 324 * len(self.ints)
-        rows, cols, vals = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size)
+        size = 36 * len(self.ints)  # node blocks: at most 6 x 6 per pair
+        rows, cols, vals = np.empty(size, np.int64), np.empty(size, np.int64), np.empty((size, 3, 3))
         if len(self.ints):
             m = scatter_pair_tangents(self.ints, self.pair_tangent, vertex_grain, vertex_ptr, block_ptr, n, blocks,
                                       rows, cols, vals)  # fmt: skip
         else:
             m = 0
-        indptr, indices, data = csr_from_triplets(rows[:m], cols[:m], vals[:m], 3 * n)
+        indptr, indices, data = csr_from_block_triplets(rows[:m], cols[:m], vals[:m], n)
         return sp.csr_matrix((data, indices, indptr), shape=(3 * n, 3 * n))
 
 
