@@ -53,14 +53,17 @@ def _split_grain(x, dx, m, lo, hi, out_c, out_t, out_phi):
     t /= mass
     J = np.zeros((3, 3))
     b = np.zeros(3)
+    r = np.empty(3)  # filled per vertex: an array expression x[i] - c would be a heap allocation per vertex
+    u = np.empty(3)
     for i in range(lo, hi):
-        r = x[i] - c
+        for k in range(3):
+            r[k] = x[i, k] - c[k]
+            u[k] = dx[i, k] - t[k]
         rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
         for a in range(3):
             J[a, a] += m[i] * rr
             for k in range(3):
                 J[a, k] -= m[i] * r[a] * r[k]
-        u = dx[i] - t
         b[0] += m[i] * (r[1] * u[2] - r[2] * u[1])
         b[1] += m[i] * (r[2] * u[0] - r[0] * u[2])
         b[2] += m[i] * (r[0] * u[1] - r[1] * u[0])
@@ -84,11 +87,11 @@ def rigid_split(x, dx, m, vertex_ptr):
         p = phi[g]
         rmax, dmax = 0.0, 0.0
         for i in range(lo, hi):
-            r = x[i] - c[g]
-            rmax = max(rmax, np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2))
-            d0 = dx[i, 0] - t[g, 0] - (p[1] * r[2] - p[2] * r[1])
-            d1 = dx[i, 1] - t[g, 1] - (p[2] * r[0] - p[0] * r[2])
-            d2 = dx[i, 2] - t[g, 2] - (p[0] * r[1] - p[1] * r[0])
+            r0, r1, r2 = x[i, 0] - c[g, 0], x[i, 1] - c[g, 1], x[i, 2] - c[g, 2]  # scalars: no allocation per vertex
+            rmax = max(rmax, np.sqrt(r0**2 + r1**2 + r2**2))
+            d0 = dx[i, 0] - t[g, 0] - (p[1] * r2 - p[2] * r1)
+            d1 = dx[i, 1] - t[g, 1] - (p[2] * r0 - p[0] * r2)
+            d2 = dx[i, 2] - t[g, 2] - (p[0] * r1 - p[1] * r0)
             dmax = max(dmax, np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
         bound[g] = np.sqrt(t[g, 0] ** 2 + t[g, 1] ** 2 + t[g, 2] ** 2) + np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2) * rmax + dmax
     return c, t, phi, bound
@@ -124,11 +127,11 @@ def path_excess(x, dx, vertex_ptr, c, t, phi):
         p = phi[g]
         th = np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2)
         for i in range(vertex_ptr[g], vertex_ptr[g + 1]):
-            r = x[i] - c[g]
-            d0 = dx[i, 0] - t[g, 0] - (p[1] * r[2] - p[2] * r[1])
-            d1 = dx[i, 1] - t[g, 1] - (p[2] * r[0] - p[0] * r[2])
-            d2 = dx[i, 2] - t[g, 2] - (p[0] * r[1] - p[1] * r[0])
-            rn = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+            r0, r1, r2 = x[i, 0] - c[g, 0], x[i, 1] - c[g, 1], x[i, 2] - c[g, 2]
+            d0 = dx[i, 0] - t[g, 0] - (p[1] * r2 - p[2] * r1)
+            d1 = dx[i, 1] - t[g, 1] - (p[2] * r0 - p[0] * r2)
+            d2 = dx[i, 2] - t[g, 2] - (p[0] * r1 - p[1] * r0)
+            rn = np.sqrt(r0**2 + r1**2 + r2**2)
             out[i] = th * th * rn * (0.5 + th / 6.0) + th * np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     return out
 
