@@ -107,7 +107,7 @@ def dissipative_force(kind, xs, v0, x0, a4, c_prev, gt_prev, was_active, was_sti
 
     xs: node positions (real or complex); velocities v = v0 + a4 (xs - x0). Returns the stick flag
     and writes the g_t to store into store (3,), both evaluated on the real parts. w0 (6,), D (6, 2),
-    wp (6,) and w (6,) of xs's type are the caller's scratch (`Scratch`: no allocation per pair).
+    wp (6,) and w (6,) of xs's type are the caller's scratch (pairs.PAIR_CHUNKS: none made per pair).
 
     Written on scalar components (the same operations in the same order as the vector form
     g = sum w_i x_i, n = g / |g|, ...): numba puts every 3-vector temporary on the heap, and
