@@ -53,11 +53,15 @@ def test_blocks_plus_coupling_equal_the_sparse_sum():
 
 
 def test_the_coupling_triplets_become_scipys_csr_matrix():
-    """csr_from_triplets (the coupling's assembly) against SciPy's COO -> CSR: duplicates summed
+    """csr_from_block_triplets with 1 x 1 blocks against SciPy's COO -> CSR: duplicates summed
     (many per entry, as pairs sharing nodes give), empty rows, explicit zeros, sorted columns."""
     import scipy.sparse as sp
 
-    from vemdem.contact.forces import csr_from_triplets
+    from vemdem.contact.forces import csr_from_block_triplets
+
+    def csr_from_triplets(rows, cols, vals, n):
+        return csr_from_block_triplets(np.asarray(rows, np.int64), np.asarray(cols, np.int64),
+                                       np.asarray(vals, float).reshape(-1, 1, 1), n)  # fmt: skip
 
     rng = np.random.default_rng(3)
     for m, n in ((0, 5), (1, 1), (40, 6), (3000, 90), (20000, 4000)):
@@ -82,7 +86,7 @@ def test_node_block_triplets_give_the_scalar_triplets_matrix_to_the_bit():
     duplicates summed in input order either way, the same values to the bit."""
     import scipy.sparse as sp
 
-    from vemdem.contact.forces import csr_from_block_triplets, csr_from_triplets
+    from vemdem.contact.forces import csr_from_block_triplets
 
     rng = np.random.default_rng(5)
     for m, n in ((0, 4), (1, 1), (50, 7), (4000, 300)):
@@ -96,8 +100,8 @@ def test_node_block_triplets_give_the_scalar_triplets_matrix_to_the_bit():
             dense[3 * rows[k] : 3 * rows[k] + 3, 3 * cols[k] : 3 * cols[k] + 3] += vals[k]
         np.testing.assert_allclose(ours.toarray(), dense, rtol=0, atol=1e-12)
         a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
-        scalar = csr_from_triplets((3 * rows[:, None, None] + a).ravel(), (3 * cols[:, None, None] + b).ravel(),
-                                   vals.ravel(), 3 * n)  # fmt: skip
+        scalar = csr_from_block_triplets((3 * rows[:, None, None] + a).ravel(), (3 * cols[:, None, None] + b).ravel(),
+                                         vals.reshape(-1, 1, 1), 3 * n)  # fmt: skip
         for ours_part, scalar_part in zip((indptr, indices, data), scalar):
             assert np.array_equal(ours_part, scalar_part)
 

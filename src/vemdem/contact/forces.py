@@ -19,15 +19,7 @@ from numba import njit, prange
 from .fade import fade_conservative, fade_conservative_tangent, is_faded
 from .law import normal_force, normal_potential
 from .narrow import EDGE_EDGE, N_NODES, gap_derivatives_into, gap_gradient_into, pair_weights
-from .pairs import C0, C1, KIND, NODE0, PAIR_CHUNKS, chunk_range
-
-
-@njit(cache=True)
-def _pair_nodes(x, ints, c, nn, xs):
-    """The positions of pair c's nodes into xs (6, 3), zero-padded."""
-    for i in range(6):
-        for a in range(3):
-            xs[i, a] = x[ints[c, NODE0 + i], a] if i < nn else 0.0
+from .pairs import C0, C1, KIND, NODE0, PAIR_CHUNKS, chunk_range, pair_nodes
 
 
 @njit(cache=True)
@@ -54,7 +46,7 @@ def _local_forces(x, ints, floats, law, energy, local_force):
         for c in range(lo, hi):
             kind = ints[c, KIND]
             nn = N_NODES[kind]
-            _pair_nodes(x, ints, c, nn, xs)
+            pair_nodes(x, ints, c, nn, xs)
             d = gap_gradient_into(kind, xs, floats[c, C0], floats[c, C1], grad, w0, D, w, g)
             _normal_terms(c, nn, d, grad, law, energy, local_force)
             if is_faded(kind, xs, law):
@@ -73,7 +65,7 @@ def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
         for c in range(lo, hi):
             kind = ints[c, KIND]
             nn = N_NODES[kind]
-            _pair_nodes(x, ints, c, nn, xs)
+            pair_nodes(x, ints, c, nn, xs)
             d = gap_derivatives_into(kind, xs, floats[c, C0], floats[c, C1], True, grad, hess, w0, D, w, g, J, B)
             fn, kd = _normal_terms(c, nn, d, grad, law, energy, local_force)
             for r in range(3 * nn):
@@ -163,21 +155,13 @@ def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_p
     return m
 
 
-def csr_from_triplets(rows, cols, vals, n_rows):
-    """(indptr, indices, data) of the n_rows-row matrix sum_k vals[k] e_rows[k] e_cols[k]^T:
-    duplicates summed, columns increasing within each row. SciPy's COO -> CSR gives the same
-    matrix, but its Python layers cost 0.3 ms for 5,000 triplets (docs/linear-solvers.md), and its
-    std::sort need not keep equal columns in order, so its sums of duplicates may differ from these
-    in the last bits. Here each row keeps its input order among equal columns, so the sums are
-    deterministic (csr_from_block_triplets with 1 x 1 blocks)."""
-    vals = np.ascontiguousarray(vals, dtype=np.float64).reshape(-1, 1, 1)
-    return csr_from_block_triplets(np.asarray(rows, np.int64), np.asarray(cols, np.int64), vals, n_rows)
-
-
 @njit(cache=True)
 def csr_from_block_triplets(rows, cols, vals, n_block_rows):
     """(indptr, indices, data) of the matrix sum_k vals[k] at block (rows[k], cols[k]), vals (m, b, b),
     as a CSR matrix of b n_block_rows rows: duplicates summed in input order, columns increasing.
+    SciPy's COO -> CSR gives the same matrix (1 x 1 blocks), but its Python layers cost 0.3 ms for
+    5,000 triplets (docs/linear-solvers.md), and its std::sort need not keep equal columns in order,
+    so its sums of duplicates may differ from these in the last bits: these are deterministic.
 
     The contact coupling arrives as 3 x 3 node blocks: sorting the blocks' columns within each
     node row (a stable insertion sort: the rows hold tens of blocks) is a ninth of the work of

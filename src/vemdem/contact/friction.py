@@ -51,7 +51,7 @@ from .narrow import (
     vertex_edge_coord,
     vertex_face_coords,
 )
-from .pairs import KIND, NODE0, PAIR_CHUNKS, chunk_range
+from .pairs import KIND, NODE0, PAIR_CHUNKS, chunk_range, pair_nodes
 
 COMPLEX_STEP = 1e-30
 
@@ -189,14 +189,8 @@ def _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, 
     velocities gathered into xs and vs. fr: (m, 5) friction parameters per pair
     (ContactModel.pair_friction)."""
     kind = ints[c, KIND]
-    for i in range(6):
-        for a in range(3):
-            if i < N_NODES[kind]:
-                xs[i, a] = x[ints[c, NODE0 + i], a]
-                vs[i, a] = v[ints[c, NODE0 + i], a]
-            else:
-                xs[i, a] = 0.0
-                vs[i, a] = 0.0
+    pair_nodes(x, ints, c, N_NODES[kind], xs)
+    pair_nodes(v, ints, c, N_NODES[kind], vs)
     stick_out[c] = dissipative_force(kind, xs, vs, xs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c],
                                      law, fr[c], m_eq[c], out, w0, D, wp, w, store)  # fmt: skip
     # element loops, not slice assignments: numba compiles those with a string-formatting error

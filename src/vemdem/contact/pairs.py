@@ -56,6 +56,14 @@ def chunk_range(k, chunks, n):
     return k * n // chunks, (k + 1) * n // chunks
 
 
+@njit(cache=True)
+def pair_nodes(x, ints, c, nn, out):
+    """Row c's nn node values of x (positions or velocities) into out (6, 3), zero-padded."""
+    for i in range(6):
+        for a in range(3):
+            out[i, a] = x[ints[c, NODE0 + i], a] if i < nn else 0.0
+
+
 # The three gap tests below are narrow.py's vertex_face_lcp, vertex_edge_lcp and edge_edge_lcp
 # (same formulas, same tolerances) written on scalars: the array versions allocate a 3-vector per
 # difference, and those allocations took most of the narrow phase (docs/contact.md, measured).
