@@ -44,8 +44,8 @@ from vemdem.contact.walls import box_walls
 from vemdem.io.state import load_state
 from vemdem.model.scene import Scene
 from vemdem.solver.explicit import FEATURE_SKIN_GAPS
-from vemdem.solver.linear import LinearSolveDiverged, NewtonSystem, make_linear_solver
-from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newmark_step, newton_blocks
+from vemdem.solver.linear import LinearSolveDiverged, make_linear_solver, woodbury
+from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newmark_step, newton_system
 from vemdem.solver.state import RunStats, State, StepControl, StepRejected
 from vemdem.vem.material import Material
 
@@ -157,9 +157,8 @@ def measure(scene, state, dt, solver_name, repeat, rotated=NewmarkParameters.rot
     def assemble():
         ev = scene.bodies.evaluate(state.x, tangent=True, mass_shift=a1, rotated_strain=rotated)
         t0 = time.perf_counter()
-        blocks, coupling = newton_blocks(scene, ev, cr)
-        return time.perf_counter() - t0, NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling,
-                                                      state.x)  # fmt: skip
+        system = newton_system(scene, ev, cr, state.x, a1)
+        return time.perf_counter() - t0, system
 
     t_asm = min(assemble()[0] for _ in range(repeat))
     _, system = assemble()
@@ -197,7 +196,10 @@ def main():
     p.add_argument("--json", type=Path)
     p.add_argument("--rotated-tangent", type=float, default=NewmarkParameters.rotated_tangent, metavar="STRAIN",
                    help="the solver's rotated_tangent (0: every grain's exact element tangent)")
+    p.add_argument("--woodbury-max-dofs", type=int, default=woodbury.WOODBURY_MAX_DOFS, metavar="K",
+                   help="rotated blocks touched on at most K dofs take the Woodbury path (0: every block its LU)")
     args = p.parse_args()
+    woodbury.WOODBURY_MAX_DOFS = args.woodbury_max_dofs
     cases = [deposit_case(int(n)) for n in args.grains.split(",") if n]
     tiles = [tuple(int(k) for k in t.split("x")) for t in args.tile.split(",") if t]
     cases += [quieted(state_case(path, tile), args.quiet) for path in args.state for tile in tiles]

@@ -469,17 +469,24 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     lu, piv, bad = np.empty_like(blocks), np.empty(dof_ptr[-1], np.int32), np.zeros(len(sizes), np.int64)
     z = grain_block.rigid_modes(rng.normal(size=(dof_ptr[-1] // 3, 3)), dof_ptr // 3)
     local, bz = np.empty((len(sizes), 6, 6)), np.empty((dof_ptr[-1], 6))
-    grain_block._lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz)
+    every = np.zeros(len(sizes), np.bool_)
+    grain_block._lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz, every)
     assert not bad.any()
     for g, A in enumerate(mats):  # the coarse products formed on the way: B_g Z_g and Z_g^T B_g Z_g
         part = slice(dof_ptr[g], dof_ptr[g + 1])
         np.testing.assert_allclose(bz[part], A @ z[part], rtol=1e-12, atol=1e-12 * np.abs(A).max())
         np.testing.assert_allclose(local[g], z[part].T @ A @ z[part], rtol=1e-12, atol=1e-11 * np.abs(A).max())
     r, out = rng.normal(size=dof_ptr[-1]), np.empty(dof_ptr[-1])
-    grain_block._lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out)
+    grain_block._lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out, every)
     for g, A in enumerate(mats):
         part = slice(dof_ptr[g], dof_ptr[g + 1])
         np.testing.assert_allclose(out[part], np.linalg.solve(A, r[part]), rtol=1e-8, atol=1e-10)
+    # blocks marked to skip (the Woodbury path's) are neither solved nor factored
+    skip = every.copy()
+    skip[3] = True
+    out[:] = np.nan
+    grain_block._lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out, skip)
+    assert np.isnan(out[dof_ptr[3] : dof_ptr[4]]).all() and not np.isnan(np.delete(out, np.s_[dof_ptr[3] : dof_ptr[4]])).any()
 
     broken = blocks.copy()
     B = broken[block_ptr[2] : block_ptr[3]].reshape(30, 30)
@@ -487,8 +494,13 @@ def test_block_lu_solves_every_block_and_flags_the_singular_ones():
     broken[block_ptr[4] + 100] = np.nan
     bad[:] = 0
     none = np.empty((0, 6))
-    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad, none, np.empty((0, 6, 6)), none)
+    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad, none, np.empty((0, 6, 6)), none, every)
     assert np.flatnonzero(bad).tolist() == [2, 4]
+    bad[:] = 0
+    skip[:] = False
+    skip[2] = True
+    grain_block._lu_blocks(broken, block_ptr, dof_ptr, lu, piv, bad, none, np.empty((0, 6, 6)), none, skip)
+    assert np.flatnonzero(bad).tolist() == [4]
 
 
 def test_gmres_ends_at_its_attainable_accuracy():

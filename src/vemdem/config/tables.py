@@ -178,6 +178,12 @@ SOLVER = {
         "takes its reference tangent rotated as Newton's matrix block (forces stay exact; 0: always the exact "
         "tangent; docs/vem.md: a third of the element kernel's time, the same Newton iterations)",
     ),
+    "woodbury_dofs": Field(
+        int, 36, non_negative,
+        "implicit, flexible grains, grain-block solver: a rotated block (rotated_tangent) whose contacts touch at "
+        "most this many of its dofs is solved by Woodbury's formula from its reference modes instead of its LU "
+        "(0: every block its LU; docs/linear-solvers.md: 18 % less per Newton iteration early in a collapse)",
+    ),
     "impact_steps": Field(
         float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
     ),

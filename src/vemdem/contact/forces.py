@@ -120,11 +120,13 @@ def local_tangent_matrix(ints, local_tangent, n_vertices: int) -> sp.csr_matrix:
 
 @njit(cache=True)
 def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_ptr, n_vertices, blocks,
-                          rows, cols, vals):  # fmt: skip
+                          rows, cols, vals, touched):  # fmt: skip
     """Add the pairs' local tangents to the grains' dense blocks (both nodes on one grain) and
     return the count of coupling node blocks (nodes on two grains) written to rows, cols (node
     indices) and vals (3 x 3 each), which must hold 36 per pair. Wall nodes (index >= n_vertices)
-    are prescribed: dropped. Serial: pairs share grains."""
+    are prescribed: dropped. touched[v] is set for every vertex whose own block received a term
+    (the grain-block solver's Woodbury path needs the dofs the contacts touch). Serial: pairs
+    share grains."""
     m = 0
     for c in range(len(ints)):
         nn = N_NODES[ints[c, KIND]]
@@ -132,6 +134,7 @@ def scatter_pair_tangents(ints, local_tangent, vertex_grain, vertex_ptr, block_p
             vi = ints[c, NODE0 + i]
             if vi >= n_vertices:
                 continue
+            touched[vi] = True
             gi = vertex_grain[vi]
             for j in range(nn):
                 vj = ints[c, NODE0 + j]

@@ -175,15 +175,18 @@ class ContactResult:
         """(m, 3) contact point of every pair on its side B (frames show them)."""
         return contact_points(x_all, self.ints, self.floats) if len(self.ints) else np.zeros((0, 3))
 
-    def add_to_blocks(self, vertex_grain, vertex_ptr, block_ptr, blocks) -> sp.csr_matrix:
+    def add_to_blocks(self, vertex_grain, vertex_ptr, block_ptr, blocks, touched=None) -> sp.csr_matrix:
         """Add the contact tangent's within-grain terms to the grains' dense blocks (in place) and
-        return the grain-to-grain coupling as one CSR matrix: no sparse sum in Newton."""
+        return the grain-to-grain coupling as one CSR matrix: no sparse sum in Newton. touched
+        (N,) bool, if given, is set where a vertex's own block received a term."""
         n = len(self.force)
         size = 36 * len(self.ints)  # node blocks: at most 6 x 6 per pair
         rows, cols, vals = np.empty(size, np.int64), np.empty(size, np.int64), np.empty((size, 3, 3))
+        if touched is None:
+            touched = np.zeros(n, np.bool_)
         if len(self.ints):
             m = scatter_pair_tangents(self.ints, self.pair_tangent, vertex_grain, vertex_ptr, block_ptr, n, blocks,
-                                      rows, cols, vals)  # fmt: skip
+                                      rows, cols, vals, touched)  # fmt: skip
         else:
             m = 0
         indptr, indices, data = csr_from_block_triplets(rows[:m], cols[:m], vals[:m], n)

@@ -14,6 +14,7 @@ positions only, so a body model is free in its choice of coordinates:
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -28,6 +29,7 @@ from ..vem.element import (
     build_elements,
     evaluate,
     projected_cauchy_stress,
+    reference_tangent,
     tangent_matrix,
 )
 from ..vem.mass import GrainMass, build_mass
@@ -73,6 +75,21 @@ class BodyModel(Protocol):
     def vibration_periods(self) -> np.ndarray: ...
 
 
+@dataclass
+class RotationReference:
+    """What the Newton block of a grain near a rotation R is made of (vem.element.evaluate's
+    rotated tangent): Q (K_g + s M_g) Q^T, Q = I (x) R, plus the contact terms within the grain.
+    The grain-block solver factors such blocks from these (docs/linear-solvers.md)."""
+
+    tangent: np.ndarray  # flat reference tangent blocks K_g, at block_ptr
+    mass: np.ndarray  # flat scalar mass blocks M_g (n_g x n_g for n_g vertices), at mass_ptr
+    mass_ptr: np.ndarray
+    positions: np.ndarray  # (N, 3) reference vertex positions
+    vertex_ptr: np.ndarray
+    block_ptr: np.ndarray
+    cache: dict = field(default_factory=dict, repr=False)  # what a solver derives once (its modal basis)
+
+
 class VemBodies:
     """Flexible grains: one linear virtual element per grain (paper eq. 8), q = vertex positions."""
 
@@ -111,6 +128,14 @@ class VemBodies:
 
     def tangent_matrix(self, blocks: np.ndarray) -> sp.csr_matrix:
         return tangent_matrix(self.elements, blocks)
+
+    def rotation_reference(self) -> RotationReference:
+        """The reference blocks of `evaluate`'s rotated tangent (made once)."""
+        if getattr(self, "_rotation_reference", None) is None:
+            el = self.elements
+            self._rotation_reference = RotationReference(reference_tangent(el), self.mass.blocks, self.mass.block_ptr,
+                                                         el.reference, el.vertex_ptr, el.block_ptr)  # fmt: skip
+        return self._rotation_reference
 
     def mass_matrix(self) -> sp.csr_matrix:
         return self.mass.matrix()

@@ -46,6 +46,8 @@ class SolverOptions:
     hold_damping_cycles: bool = True
     # implicit flexible: the strain below which a grain's Newton block is its reference tangent rotated
     rotated_tangent: float = 1e-4
+    # implicit flexible, grain-block: rotated blocks touched on at most this many dofs solved by Woodbury
+    woodbury_dofs: int = 36
     impact_steps: float = 0.0
     entry_fraction: float = 0.05
     energy_growth: float = 1e-3
@@ -95,7 +97,7 @@ class ImplicitNewmark:
         self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
                                         xtol=options.newton_xtol,
                                         mass_damping=options.mass_damping, predictor=options.predictor,
-                                        linear=make_linear_solver(options.linear),
+                                        linear=make_linear_solver(options.linear, options.woodbury_dofs),
                                         freeze_cycles=options.freeze_cycles,
                                         break_stick_cycles=options.break_stick_cycles,
                                         hold_damping_cycles=options.hold_damping_cycles,

@@ -203,14 +203,27 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
     return alpha
 
 
-def newton_blocks(scene: Scene, el, cr):
+def newton_blocks(scene: Scene, el, cr, touched=None):
     """The Newton matrix K = a1 M + K_int + K_contact as the bodies' dense blocks (`el`, evaluated
     with mass_shift a1, plus the contact terms within a grain, added in place by a compiled kernel)
-    and one sparse coupling matrix (contact terms between grains): no sparse sums (issue 14)."""
+    and one sparse coupling matrix (contact terms between grains): no sparse sums (issue 14).
+    touched (N,) bool, if given, marks the vertices whose blocks received contact terms."""
     blocks = el.blocks  # freshly allocated by evaluate: updated in place
     bodies = scene.bodies
-    coupling = cr.add_to_blocks(scene.contact.topology.vertex_grain, bodies.vertex_ptr, bodies.block_ptr, blocks)
+    coupling = cr.add_to_blocks(scene.contact.topology.vertex_grain, bodies.vertex_ptr, bodies.block_ptr, blocks,
+                                touched)  # fmt: skip
     return blocks, coupling
+
+
+def newton_system(scene: Scene, el, cr, x: np.ndarray, mass_shift: float) -> NewtonSystem:
+    """newton_blocks as the linear solvers' NewtonSystem (`el` evaluated with this mass_shift),
+    with what the grain-block solver's Woodbury path needs of the rotated blocks."""
+    bodies = scene.bodies
+    touched = np.zeros(bodies.n_vertices, np.bool_)
+    blocks, coupling = newton_blocks(scene, el, cr, touched)
+    reference = bodies.rotation_reference() if el.rotated is not None and hasattr(bodies, "rotation_reference") else None
+    return NewtonSystem(blocks, bodies.block_ptr, bodies.dof_ptr, coupling, x, rotated=el.rotated,
+                        rotations=el.rotations, touched=touched, mass_shift=mass_shift, reference=reference)  # fmt: skip
 
 
 _DEFAULT_LINEAR = []
@@ -352,14 +365,14 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     damping = _DampingFlips() if params.hold_damping_cycles else None
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
+    shift = a1 + params.mass_damping * a4  # the Newton matrix's mass term: K + shift M
     tangent_blocks = exact_blocks = 0
     for it in range(1, params.max_iterations + 1):
         du = x - state.x
         acc = a1 * du - a2 * state.v - a3 * state.a
         vel = a4 * du + a5 * state.v + a6 * state.a
         try:
-            el = scene.bodies.evaluate(x, tangent=True, mass_shift=a1 + params.mass_damping * a4,
-                                      rotated_strain=params.rotated_tangent)  # fmt: skip
+            el = scene.bodies.evaluate(x, tangent=True, mass_shift=shift, rotated_strain=params.rotated_tangent)
             cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen,
                                   slipping=None if flips is None else flips.broken,
                                   undamped=None if damping is None else damping.broken)  # fmt: skip
@@ -381,8 +394,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             raise StepRejected("non-finite residual")
         r_norm = np.abs(R).max()
         scale = max(np.abs(f_grav).max(), np.abs(inertia).max(), np.abs(cr.force).max(), 1e-300)
-        blocks, coupling = newton_blocks(scene, el, cr)
-        linear.factor(NewtonSystem(blocks, scene.bodies.block_ptr, scene.bodies.dof_ptr, coupling, x))
+        linear.factor(newton_system(scene, el, cr, x, shift))
         drive = 0.0 if at_end else _wall_drive(contact, x, tw, t1, candidates, state.history, vel, a4).ravel()
         eta = _forcing(params, eta, corrections[-1][1] if corrections else None, r_norm)
         dx = -linear.solve(R + drive, eta).reshape(-1, 3)

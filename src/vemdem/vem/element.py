@@ -275,7 +275,7 @@ def _evaluate_grains(
     x, X, vertex_ptr, virtual_ptr, virtual_weight_ptr, virtual_weights,
     piece_ptr, piece_weight, piece_node_ptr, piece_nodes, piece_grads,
     mu, kappa, block_ptr, want_force, want_tangent, energy, force, blocks, inverted,
-    mass_blocks, mass_ptr, mass_shift, projection_grads, reference_blocks, rotated_strain, rotated,
+    mass_blocks, mass_ptr, mass_shift, projection_grads, reference_blocks, rotated_strain, rotated, rotations,
 ):  # fmt: skip
     n_grains = len(vertex_ptr) - 1
     for g in prange(n_grains):
@@ -317,6 +317,8 @@ def _evaluate_grains(
             e, _ = _piece_sum(ua, p0, p1, piece_weight, piece_node_ptr, piece_nodes, piece_grads, mu[g], kappa[g],
                               want_force and not checked, exact, np.empty((0, 0)), fa, Ka, AG)  # fmt: skip
         rotated[g] = near_rigid
+        if near_rigid:
+            rotations[g] = R
         energy[g] = e
         if e == np.inf:
             inverted[g] = True
@@ -404,6 +406,7 @@ class Evaluation:
     force: np.ndarray | None  # (N, 3) internal force dW/dx
     blocks: np.ndarray | None  # flat dense tangent blocks (see GrainElements.block_ptr)
     rotated: np.ndarray | None = None  # (G,) bool: the grain's block is its reference block rotated
+    rotations: np.ndarray | None = None  # (G, 3, 3): that rotation R where rotated (else undefined)
 
     @property
     def total_energy(self) -> float:
@@ -435,6 +438,7 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
     else:
         mass_blocks, mass_ptr = mass.blocks, mass.block_ptr
     rotated = np.zeros(G, dtype=np.bool_)
+    rotations = np.empty((G if tangent else 0, 3, 3))
     rotated_strain = float(rotated_strain) if tangent else 0.0
     reference_blocks = reference_tangent(elements) if rotated_strain > 0.0 else np.zeros(1)
     _evaluate_grains(
@@ -442,14 +446,15 @@ def evaluate(elements: GrainElements, x: np.ndarray, force: bool = True, tangent
         elements.piece_ptr, elements.piece_weight, elements.piece_node_ptr, elements.piece_nodes,
         elements.piece_grads, elements.mu, elements.kappa, elements.block_ptr, force, tangent,
         energy, f, blocks, inverted, mass_blocks, mass_ptr, float(mass_shift),
-        elements.projection_grads, reference_blocks, rotated_strain, rotated,
+        elements.projection_grads, reference_blocks, rotated_strain, rotated, rotations,
     )  # fmt: skip
     if raise_on_inversion and inverted.any():
         bad = np.flatnonzero(inverted)
         raise InvertedElementError(
             f"inverted element (J <= 0) in grain {bad[:10].tolist()}: the deformation is not admissible"
         )
-    return Evaluation(energy, f if force else None, blocks if tangent else None, rotated if tangent else None)
+    return Evaluation(energy, f if force else None, blocks if tangent else None, rotated if tangent else None,
+                      rotations if tangent else None)  # fmt: skip
 
 
 def reference_tangent(elements: GrainElements) -> np.ndarray:

@@ -43,8 +43,8 @@ class AutoSolver(CountersCarried):
     HOLD = 4
     MAX_HOLD = 256
 
-    def __init__(self):
-        self.direct, self.block = DirectSolver(), GrainBlockSolver()
+    def __init__(self, woodbury_dofs: int | None = None):
+        self.direct, self.block = DirectSolver(), GrainBlockSolver(woodbury_max_dofs=woodbury_dofs)
         self.stats = self.block.stats
         self._current = self.block
         self._hold, self._skip = self.HOLD, 0
@@ -97,14 +97,16 @@ class AutoSolver(CountersCarried):
         self.direct.factor(self._system)
 
 
-def make_linear_solver(name: str = "auto") -> LinearSolver:
+def make_linear_solver(name: str = "auto", woodbury_dofs: int | None = None) -> LinearSolver:
+    """woodbury_dofs: the grain-block solver's bound for its Woodbury path (None: the default,
+    woodbury.WOODBURY_MAX_DOFS; 0: every block its LU)."""
     single_threaded_blas()
     if name == "direct":
         return DirectSolver()
     if name == "grain-block":
-        return GrainBlockSolver()
+        return GrainBlockSolver(woodbury_max_dofs=woodbury_dofs)
     if name == "auto":
-        return AutoSolver()
+        return AutoSolver(woodbury_dofs)
     raise ValueError(f"linear solver must be one of {NAMES}, got {name!r}")
 
 

@@ -55,6 +55,14 @@ class NewtonSystem:
     coupling: sp.csr_matrix | None = None  # entries between different bodies only
     positions: np.ndarray | None = None  # (N, 3) vertex positions (flexible bodies: rigid modes)
     _csr: sp.csr_matrix | None = field(default=None, repr=False)
+    # Rotated blocks (docs/linear-solvers.md, "The rotated-block Woodbury path"): where rotated[g],
+    # B_g = Q (K_g + mass_shift M_g) Q^T + the contact terms on the dofs of the `touched` vertices,
+    # Q = I (x) rotations[g], K_g and M_g the body model's `reference` (model.bodies.RotationReference)
+    rotated: np.ndarray | None = None  # (G,) bool
+    rotations: np.ndarray | None = None  # (G, 3, 3)
+    touched: np.ndarray | None = None  # (N,) bool
+    mass_shift: float = 0.0
+    reference: object | None = None
 
     @property
     def n(self) -> int:

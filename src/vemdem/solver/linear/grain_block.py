@@ -29,29 +29,22 @@ from contextlib import contextmanager
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-from numba import njit, prange, types
+from numba import njit, prange
 
 from .base import CountersCarried, LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
 from .direct import superlu
+from .lapack import _DOUBLE, _GETRF
+from . import woodbury
+from .woodbury import WoodburyBlocks, modal_basis
 
 
-# LAPACK's dgetrf, through numba's own wrapper (the one behind np.linalg.inv in compiled code):
-# a C symbol resolved by name, so the kernels that call it stay cacheable (a ctypes pointer would
-# not be). The wrapper fetches the LAPACK routine under the GIL on its first call, so the kernel
-# makes one call on the calling thread before its parallel loop (a worker thread asking for the
-# GIL the caller holds would wait for ever).
-_GETRF = types.ExternalFunction(
-    "numba_xxgetrf",
-    types.intc(types.char, types.intp, types.intp, types.CPointer(types.float64), types.intp,
-               types.CPointer(types.int32)),
-)  # fmt: skip
-_DOUBLE = ord("d")
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz):
-    """LU with partial pivoting of every block (LAPACK dgetrf on a copy); bad[g] = 1 marks a
-    singular block (a pivot below 1e-15 of the block's largest entry, or not finite).
+def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz, skip):
+    """LU with partial pivoting of every block (LAPACK dgetrf on a copy) but those marked in skip
+    (the Woodbury path's: woodbury.py); bad[g] = 1 marks a singular block (a pivot below 1e-15 of
+    the block's largest entry, or not finite).
 
     The blocks are stored by rows and LAPACK reads by columns, so each factorisation is of the
     block's transpose, B_g^T = P L U; `_lu_solve_blocks` solves with B_g = U^T L^T P^T.
@@ -65,6 +58,8 @@ def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz):
     _GETRF(_DOUBLE, 1, 1, one.ctypes, 1, one_piv.ctypes)
     products = z.shape[0] > 0
     for g in prange(len(dof_ptr) - 1):
+        if skip[g]:
+            continue
         n = dof_ptr[g + 1] - dof_ptr[g]
         b0, p0 = block_ptr[g], dof_ptr[g]
         scale = 0.0
@@ -104,11 +99,13 @@ def _lu_blocks(blocks, block_ptr, dof_ptr, lu, piv, bad, z, local, bz):
 
 
 @njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
-def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out):
-    """out_g = B_g^-1 r_g from `_lu_blocks`' factors: U^T y = r (U^T is the lower triangle of the
-    stored rows), L^T z = y (the strict upper one, unit diagonal), then LAPACK's row interchanges
-    undone in reverse order."""
+def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out, skip):
+    """out_g = B_g^-1 r_g from `_lu_blocks`' factors (the grains not marked in skip): U^T y = r (U^T
+    is the lower triangle of the stored rows), L^T z = y (the strict upper one, unit diagonal),
+    then LAPACK's row interchanges undone in reverse order."""
     for g in prange(len(dof_ptr) - 1):
+        if skip[g]:
+            continue
         n = dof_ptr[g + 1] - dof_ptr[g]
         b0, p0 = block_ptr[g], dof_ptr[g]
         A = lu[b0 : b0 + n * n].reshape(n, n)
@@ -387,10 +384,15 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
 
     name = "grain-block"
 
-    def __init__(self, restart: int = 40, max_iterations: int = 200, coarse: bool = True):
+    def __init__(self, restart: int = 40, max_iterations: int = 200, coarse: bool = True,
+                 woodbury_max_dofs: int | None = None):  # fmt: skip
+        """woodbury_max_dofs: rotated blocks whose contacts touch at most this many dofs take the
+        Woodbury path (0: every block its LU; None: woodbury.WOODBURY_MAX_DOFS as it is now)."""
         self.restart, self.max_iterations, self.coarse = restart, max_iterations, coarse
+        self.woodbury_max_dofs = woodbury.WOODBURY_MAX_DOFS if woodbury_max_dofs is None else woodbury_max_dofs
         self.stats = SolverStats()
         self._coarse = None  # the last Newton matrix's coarse space, whose LU the next one may keep
+        self._woodbury = None
 
     # ------------------------------------------------------------------ set-up per Newton matrix
     def factor(self, system: NewtonSystem) -> None:
@@ -402,7 +404,11 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
         coarse = self.coarse and s.positions is not None
         z = rigid_modes(s.positions, s.dof_ptr // 3) if coarse else np.empty((0, 6))
         local, bz = np.empty((s.n_bodies if coarse else 0, 6, 6)), np.empty((len(z), 6))
-        _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad, z, local, bz)
+        self._woodbury = self._woodbury_blocks(s, coarse)
+        skip = self._woodbury.chosen if self._woodbury is not None else np.zeros(s.n_bodies, np.bool_)
+        _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad, z, local, bz, skip)
+        if self._woodbury is not None:
+            self._woodbury.factor(s, s.reference, z, local, bz, bad)
         if bad.any():
             raise SingularSystemError(f"singular tangent block of grain {int(np.flatnonzero(bad)[0])}; "
                                       "is every rigid-body mode constrained?")  # fmt: skip
@@ -410,6 +416,18 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
         if coarse:
             self._coarse = _CoarseSpace(s, (z, local, bz), self._kept_lu(before), self.stats)
         self.stats.factorisations += 1
+
+    def _woodbury_blocks(self, s: NewtonSystem, coarse: bool) -> WoodburyBlocks | None:
+        """The Woodbury path's grains of this matrix (None: every block its LU). It needs the
+        rotated blocks' reference, a positive mass shift (A = Q (K + s M) Q^T invertible) and the
+        coarse space, whose products it makes from the rotated reference modes."""
+        if (self.woodbury_max_dofs <= 0 or not coarse or s.rotated is None or s.reference is None
+                or s.touched is None or not s.mass_shift > 0.0 or not s.rotated.any()):  # fmt: skip
+            return None
+        ref = s.reference
+        basis = ref.cache.get("modal") or modal_basis(ref, rigid_modes(ref.positions, ref.vertex_ptr))
+        blocks = WoodburyBlocks(s, basis, self.woodbury_max_dofs)
+        return blocks if len(blocks.grains) else None
 
     def forget(self) -> None:
         """The next Newton matrix factorises its own coarse LU (newmark_step calls this at each step,
@@ -438,7 +456,11 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
             y, ky = self._coarse.correction_and_product(r)
             rest = r - ky
         out = np.empty(s.n)
-        _lu_solve_blocks(self._lu, self._piv, s.block_ptr, s.dof_ptr, rest, out)
+        wb = self._woodbury
+        _lu_solve_blocks(self._lu, self._piv, s.block_ptr, s.dof_ptr, rest, out,
+                         wb.chosen if wb is not None else np.zeros(s.n_bodies, np.bool_))  # fmt: skip
+        if wb is not None:
+            wb.solve(s, rest, out)
         w = r + s.coupling @ out if s.coupling is not None and s.coupling.nnz else r.copy()
         return (out if y is None else y + out), w
 
