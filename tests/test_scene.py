@@ -150,7 +150,7 @@ def test_a_run_resumed_during_the_auto_solvers_hold_continues_to_the_same_result
     monkeypatch.setattr(GrainBlockSolver, "solve", failing)
     made = []
     make = api.make_linear_solver
-    monkeypatch.setattr(api, "make_linear_solver", lambda name: made.append(make(name)) or made[-1])
+    monkeypatch.setattr(api, "make_linear_solver", lambda *args: made.append(make(*args)) or made[-1])
     monkeypatch.setattr(loop_mod, "CHECKPOINT_EVERY_S", 0.0)
     cfg = drop_config(duration=0.006)
     full = scene_mod.run(cfg, tmp_path / "full")

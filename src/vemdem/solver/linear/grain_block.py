@@ -17,8 +17,11 @@ helps):
 B^-1 is a batched dense LU of every grain's block (LAPACK's dgetrf per block, parallel over
 grains: 55 ms for 515 blocks of 90 x 90 on one thread against 90-107 ms for our own compiled LU and
 160 ms for NumPy's batched inverse, docs/linear-solvers.md; refactorised at every Newton
-iteration: a kept one costs 17-26 GMRES iterations). GMRES solves K P^-1 u = b, x = P^-1 u,
-to ||b - K x|| <= rtol ||b||, the tolerance the caller ties to Newton's progress.
+iteration: a kept one costs 17-26 GMRES iterations), except where a grain's block is its rotated
+reference one with few dofs touched by contacts: there Woodbury's formula from the grain's
+reference modes (woodbury.py; its Z_g are then its rotated reference's rigid modes). GMRES solves
+K P^-1 u = b, x = P^-1 u, to ||b - K x|| <= rtol ||b||, the tolerance the caller ties to Newton's
+progress.
 """
 
 from __future__ import annotations
