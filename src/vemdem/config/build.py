@@ -42,8 +42,8 @@ def solver_options_from(cfg: dict) -> SolverOptions:
     s = cfg["solver"]
     keys = ("integrator", "beta", "gamma", "dt", "dt_min", "dt_max", "max_iterations", "easy_iterations",
             "grow_after", "freeze_cycles", "break_stick_cycles", "hold_damping_cycles", "rotated_tangent",
-            "woodbury_dofs", "impact_steps", "entry_fraction", "energy_growth", "safety", "mass_damping", "linear", "predictor",
-            "newton_xtol")  # fmt: skip
+            "woodbury_dofs", "impact_steps", "entry_fraction", "energy_growth", "safety", "mass_damping", "linear",
+            "predictor", "newton_xtol")  # fmt: skip
     return SolverOptions(**{k: s[k] for k in keys})
 
 

@@ -221,9 +221,11 @@ def newton_system(scene: Scene, el, cr, x: np.ndarray, mass_shift: float) -> New
     bodies = scene.bodies
     touched = np.zeros(bodies.n_vertices, np.bool_)
     blocks, coupling = newton_blocks(scene, el, cr, touched)
-    reference = bodies.rotation_reference() if el.rotated is not None and hasattr(bodies, "rotation_reference") else None
+    rotating = el.rotated is not None and hasattr(bodies, "rotation_reference")
+    reference = bodies.rotation_reference() if rotating else None
     return NewtonSystem(blocks, bodies.block_ptr, bodies.dof_ptr, coupling, x, rotated=el.rotated,
-                        rotations=el.rotations, touched=touched, mass_shift=mass_shift, reference=reference)  # fmt: skip
+                        rotations=el.rotations, touched=touched, mass_shift=mass_shift,
+                        reference=reference)  # fmt: skip
 
 
 _DEFAULT_LINEAR = []

@@ -36,6 +36,9 @@ from .lapack import _DOUBLE, _GETRF
 WOODBURY_MAX_DOFS = 36
 
 
+BASIS_BATCH = 1024  # grains per batched eigh in modal_basis (about 330 MB of temporaries at 90 dofs)
+
+
 @dataclass
 class ModalBasis:
     """Per grain, the generalised eigenvectors of (K_g, M_g (x) I_3), at the blocks' offsets."""
@@ -59,11 +62,15 @@ def modal_basis(reference, z_ref: np.ndarray) -> ModalBasis:
     lam = np.empty(3 * vptr[-1])
     mz = np.empty_like(z_ref)
     zmz = np.empty((len(counts), 6, 6))
-    for nv in np.unique(counts):
-        grains = np.flatnonzero(counts == nv)
+    groups = [np.flatnonzero(counts == nv) for nv in np.unique(counts)]
+    # batches of at most BASIS_BATCH grains: five n x n arrays per grain are alive at once
+    batches = [grains[i : i + BASIS_BATCH] for grains in groups for i in range(0, len(grains), BASIS_BATCH)]
+    for grains in batches:
+        nv = int(counts[grains[0]])
         n = 3 * nv
         K = np.stack([reference.tangent[bptr[g] : bptr[g + 1]] for g in grains]).reshape(-1, n, n)
-        M = np.stack([reference.mass[reference.mass_ptr[g] : reference.mass_ptr[g + 1]] for g in grains]).reshape(-1, nv, nv)
+        mptr = reference.mass_ptr
+        M = np.stack([reference.mass[mptr[g] : mptr[g + 1]] for g in grains]).reshape(-1, nv, nv)
         Li = np.linalg.inv(np.linalg.cholesky(M))
         Li3 = np.einsum("gij,ab->giajb", Li, np.eye(3)).reshape(-1, n, n)
         A = Li3 @ (0.5 * (K + K.transpose(0, 2, 1))) @ Li3.transpose(0, 2, 1)
