@@ -110,6 +110,7 @@ def test_gmres_with_the_woodbury_path_solves_the_newton_system_as_with_every_lu(
         solver = GrainBlockSolver(woodbury_max_dofs=max_dofs)
         solver.factor(s)
         assert (solver._woodbury is not None) == (max_dofs > 0)
+        assert solver.stats.woodbury_blocks == (s.n_bodies if max_dofs > 0 else 0)
         x = solver.solve(b, rtol=1e-10)
         assert np.linalg.norm(K @ x - b) <= 1e-10 * np.linalg.norm(b)
         solutions.append(x)

@@ -148,6 +148,8 @@ def _linear(integrator) -> dict | None:
             # grain-block: SuperLU factorisations of coarse matrices, and the inner GMRES iterations of
             # those solved with an LU kept from an earlier Newton matrix (grain_block.KEPT_COARSE_*)
             "coarse_factorisations": stats.coarse_factorisations, "coarse_iterations": stats.coarse_iterations,
+            # grain-block: grain blocks solved by Woodbury's formula ([solver] woodbury_dofs), all matrices
+            "woodbury_blocks": stats.woodbury_blocks,
             "counted_since": "the run started (checkpoints carry the counters)"}  # fmt: skip
 
 

@@ -123,6 +123,7 @@ class SolverStats:
     stalled: int = 0  # grain-block: solves ended at GMRES's attainable accuracy (grain_block.STALL_ACCEPT)
     coarse_factorisations: int = 0  # grain-block: SuperLU factorisations of the coarse matrix
     coarse_iterations: int = 0  # grain-block: inner GMRES iterations on coarse matrices with a kept LU
+    woodbury_blocks: int = 0  # grain-block: grain blocks solved by Woodbury's formula (woodbury.py), all matrices
 
     def restore(self, counts: dict) -> None:
         """Counters from a checkpoint (asdict of an earlier SolverStats), in place: a solver may

@@ -412,6 +412,7 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
         _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad, z, local, bz, skip)
         if self._woodbury is not None:
             self._woodbury.factor(s, s.reference, z, local, bz, bad)
+            self.stats.woodbury_blocks += len(self._woodbury.grains)
         if bad.any():
             raise SingularSystemError(f"singular tangent block of grain {int(np.flatnonzero(bad)[0])}; "
                                       "is every rigid-body mode constrained?")  # fmt: skip
