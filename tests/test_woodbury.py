@@ -60,7 +60,7 @@ def dense_block(s, g):
 def test_modal_basis_diagonalises_the_reference_tangent_and_mass():
     s = turned_system(3.3e8)
     ref = s.reference
-    basis = modal_basis(ref, rigid_modes(ref.positions, ref.vertex_ptr))
+    basis = modal_basis(ref)
     for g in range(s.n_bodies):
         n, nv = s.dof_ptr[g + 1] - s.dof_ptr[g], (s.dof_ptr[g + 1] - s.dof_ptr[g]) // 3
         P = basis.phi[s.block_ptr[g] : s.block_ptr[g + 1]].reshape(n, n)
@@ -79,12 +79,12 @@ def test_modal_basis_diagonalises_the_reference_tangent_and_mass():
 def test_woodbury_block_solves_and_products_equal_the_dense_blocks(shift, make):
     s = make(shift)
     ref = s.reference
-    wb = WoodburyBlocks(s, modal_basis(ref, rigid_modes(ref.positions, ref.vertex_ptr)), max_dofs=99)
+    wb = WoodburyBlocks(s, modal_basis(ref), max_dofs=99)
     assert wb.chosen.all() and (np.diff(wb.tptr) > 0).all()  # every grain, each with contact terms
     z = rigid_modes(s.positions, s.dof_ptr // 3)
     local, bz = np.empty((s.n_bodies, 6, 6)), np.empty_like(z)
     bad = np.zeros(s.n_bodies, np.int64)
-    wb.factor(s, ref, z, local, bz, bad)
+    wb.factor(s, z, local, bz, bad)
     assert not bad.any()
     r = np.random.default_rng(2).normal(size=s.n)
     out = np.full(s.n, np.nan)
@@ -122,7 +122,7 @@ def test_gmres_with_the_woodbury_path_solves_the_newton_system_as_with_every_lu(
 def test_grains_touched_on_more_dofs_than_the_bound_keep_their_lu():
     s = turned_system(3.3e8)
     ref = s.reference
-    basis = modal_basis(ref, rigid_modes(ref.positions, ref.vertex_ptr))
+    basis = modal_basis(ref)
     k = np.add.reduceat(s.touched.astype(int), s.dof_ptr[:-1] // 3) * 3
     bound = int(np.median(k))
     wb = WoodburyBlocks(s, basis, max_dofs=bound)

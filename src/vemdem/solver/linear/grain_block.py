@@ -37,6 +37,7 @@ from numba import njit, prange
 from .base import CountersCarried, LinearSolveDiverged, NewtonSystem, SingularSystemError, SolverStats
 from .direct import superlu
 from .lapack import _DOUBLE, _GETRF
+from .modes import rigid_modes
 from . import woodbury
 from .woodbury import WoodburyBlocks, modal_basis
 
@@ -132,43 +133,6 @@ def _lu_solve_blocks(lu, piv, block_ptr, dof_ptr, r, out, skip):
                 y[k] = y[p]
                 y[p] = t
         out[p0 : p0 + n] = y
-
-
-@njit(cache=True, parallel=True)
-def _rigid_modes(x, vertex_ptr, z):
-    for g in prange(len(vertex_ptr) - 1):
-        lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
-        c = np.zeros(3)
-        for i in range(lo, hi):
-            c += x[i]
-        c /= hi - lo
-        ss = 0.0
-        for i in range(lo, hi):
-            ss += np.sum((x[i] - c) ** 2)
-        size = max(np.sqrt(ss / (hi - lo)), 1e-300)
-        for i in range(lo, hi):
-            r = (x[i] - c) / size
-            for k in range(3):
-                row = 3 * i + k
-                for m in range(6):
-                    z[row, m] = 0.0
-                z[row, k] = 1.0
-            # e_m x r for m = 0, 1, 2 in the columns 3 + m
-            z[3 * i + 1, 3] = r[2]
-            z[3 * i + 2, 3] = -r[1]
-            z[3 * i + 0, 4] = -r[2]
-            z[3 * i + 2, 4] = r[0]
-            z[3 * i + 0, 5] = r[1]
-            z[3 * i + 1, 5] = -r[0]
-
-
-def rigid_modes(x: np.ndarray, vertex_ptr: np.ndarray) -> np.ndarray:
-    """(3N, 6) rows of Z: translations and rotations (scaled by the grain's size) about each
-    grain's vertex average, dof 3 v + i."""
-    x = np.ascontiguousarray(x, float)
-    z = np.empty((3 * len(x), 6))
-    _rigid_modes(x, np.asarray(vertex_ptr, np.int64), z)
-    return z
 
 
 @njit(cache=True)
@@ -408,10 +372,11 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
         z = rigid_modes(s.positions, s.dof_ptr // 3) if coarse else np.empty((0, 6))
         local, bz = np.empty((s.n_bodies if coarse else 0, 6, 6)), np.empty((len(z), 6))
         self._woodbury = self._woodbury_blocks(s, coarse)
-        skip = self._woodbury.chosen if self._woodbury is not None else np.zeros(s.n_bodies, np.bool_)
-        _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad, z, local, bz, skip)
+        # the Woodbury path's grains, which the LU kernels skip (precondition too)
+        self._skip = self._woodbury.chosen if self._woodbury is not None else np.zeros(s.n_bodies, np.bool_)
+        _lu_blocks(s.blocks, s.block_ptr, s.dof_ptr, self._lu, self._piv, bad, z, local, bz, self._skip)
         if self._woodbury is not None:
-            self._woodbury.factor(s, s.reference, z, local, bz, bad)
+            self._woodbury.factor(s, z, local, bz, bad)
             self.stats.woodbury_blocks += len(self._woodbury.grains)
         if bad.any():
             raise SingularSystemError(f"singular tangent block of grain {int(np.flatnonzero(bad)[0])}; "
@@ -428,9 +393,7 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
         if (self.woodbury_max_dofs <= 0 or not coarse or s.rotated is None or s.reference is None
                 or s.touched is None or not s.mass_shift > 0.0 or not s.rotated.any()):  # fmt: skip
             return None
-        ref = s.reference
-        basis = ref.cache.get("modal") or modal_basis(ref, rigid_modes(ref.positions, ref.vertex_ptr))
-        blocks = WoodburyBlocks(s, basis, self.woodbury_max_dofs)
+        blocks = WoodburyBlocks(s, modal_basis(s.reference), self.woodbury_max_dofs)
         return blocks if len(blocks.grains) else None
 
     def forget(self) -> None:
@@ -460,11 +423,9 @@ class GrainBlockSolver(CountersCarried):  # the coarse LU is the step's own (for
             y, ky = self._coarse.correction_and_product(r)
             rest = r - ky
         out = np.empty(s.n)
-        wb = self._woodbury
-        _lu_solve_blocks(self._lu, self._piv, s.block_ptr, s.dof_ptr, rest, out,
-                         wb.chosen if wb is not None else np.zeros(s.n_bodies, np.bool_))  # fmt: skip
-        if wb is not None:
-            wb.solve(s, rest, out)
+        _lu_solve_blocks(self._lu, self._piv, s.block_ptr, s.dof_ptr, rest, out, self._skip)
+        if self._woodbury is not None:
+            self._woodbury.solve(s, rest, out)
         w = r + s.coupling @ out if s.coupling is not None and s.coupling.nnz else r.copy()
         return (out if y is None else y + out), w
 

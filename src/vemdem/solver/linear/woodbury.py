@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit, prange
 
 from .lapack import _DOUBLE, _GETRF
+from .modes import rigid_modes
 
 # Grains whose contacts touch more dofs than this take the LU ([solver] woodbury_dofs; T holds
 # whole vertices, so k counts in threes). benchmarks/bench_woodbury.py, 515 grains of 30 vertices,
@@ -50,13 +51,14 @@ class ModalBasis:
     zmz: np.ndarray  # (G, 6, 6) Z_ref^T (M_g (x) I_3) Z_ref
 
 
-def modal_basis(reference, z_ref: np.ndarray) -> ModalBasis:
+def modal_basis(reference) -> ModalBasis:
     """The basis of a model.bodies.RotationReference, made once (cached on it). Grains with the
     same number of vertices are solved as one batch: M = L L^T, eigh of L^-1 K L^-T."""
     cached = reference.cache.get("modal")
     if cached is not None:
         return cached
     vptr, bptr = reference.vertex_ptr, reference.block_ptr
+    z_ref = rigid_modes(reference.positions, vptr)
     counts = np.diff(vptr)
     phi = np.empty(bptr[-1])
     lam = np.empty(3 * vptr[-1])
@@ -96,8 +98,7 @@ class WoodburyBlocks:
         G = s.n_bodies
         vptr = s.dof_ptr // 3
         touched = np.asarray(s.touched, np.bool_)
-        per_grain = np.add.reduceat(touched.astype(np.int64), vptr[:-1]) if len(touched) else np.zeros(G, np.int64)
-        per_grain[np.diff(vptr) == 0] = 0
+        per_grain = np.add.reduceat(touched.astype(np.int64), vptr[:-1])  # touched vertices (grains are never empty)
         self.chosen = np.asarray(s.rotated, np.bool_) & (3 * per_grain <= max_dofs)
         self.grains = np.flatnonzero(self.chosen).astype(np.int64)
         k = 3 * per_grain[self.grains]
@@ -116,10 +117,10 @@ class WoodburyBlocks:
         self.s_lu = np.empty(self.cptr[-1])
         self.s_piv = np.empty(self.tptr[-1], np.int32)
 
-    def factor(self, system, reference, z, local, bz, bad) -> None:
+    def factor(self, system, z, local, bz, bad) -> None:
         """C_TT, W, S's LU of the chosen grains; their rows of Z (rotated reference modes), of B Z
         and their Z^T B Z, in place; bad[g] = 1 marks a singular S."""
-        s, b = system, self.basis
+        s, b, reference = system, self.basis, system.reference
         _woodbury_factor(self.grains, s.blocks, s.block_ptr, s.dof_ptr, reference.tangent, reference.mass,
                          reference.mass_ptr, b.phi, b.lam, self.rotations, self.shift, self.tdof, self.tptr,
                          self.cptr, self.wptr, b.z_ref, b.mz_ref, b.zmz, self.c_tt, self.w, self.s_lu, self.s_piv, z,
