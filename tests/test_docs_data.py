@@ -32,3 +32,32 @@ def test_every_series_has_its_packs_and_rises_with_friction(tmp_path):
     out = tmp_path / "angles.png"
     module.main([str(out)])
     assert out.stat().st_size > 20_000
+
+
+LID_SCRIPT = SCRIPT.parent / "lid515_real_vs_scaled.py"
+
+
+def test_the_lid_curves_say_what_the_docs_say(tmp_path):
+    """docs/results.md, "The same pack with mass scaling 1e6": while the pack rearranges (15-19 %
+    strain) both forces rise through 0.03-1 pack weights, the real-density one 1-5 times the other;
+    past 22 % the real-density pack's jam carries tens to thousands of pack weights, the
+    mass-scaled one under 15."""
+    spec = importlib.util.spec_from_file_location("lid515_real_vs_scaled", LID_SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    from vemdem.analysis.force_strain import read_force_strain_csv
+
+    curves = {}
+    for name, scale, *_ in module.RUNS:
+        phase, strain, force = read_force_strain_csv(LID_SCRIPT.parent / name)
+        load = phase == "load"
+        curves[name] = (strain[load], force[load] / (module.PACK_WEIGHT_N * scale))
+    (e_real, w_real), (e_scaled, w_scaled) = curves["lid515_real.csv"], curves["lid515_scaled.csv"]
+    for e in (0.15, 0.16, 0.17, 0.18, 0.19):
+        real, scaled = np.interp(e, e_real, w_real), np.interp(e, e_scaled, w_scaled)
+        assert 0.03 < scaled <= real < 1.0 and real < 5 * scaled, (e, real, scaled)
+    assert np.interp(0.22, e_real, w_real) > 30 and w_real.max() > 1000
+    assert w_scaled.max() < 15 and np.interp(0.22, e_scaled, w_scaled) < 3
+    out = tmp_path / "lid.png"
+    module.main(out)
+    assert out.stat().st_size > 20_000
