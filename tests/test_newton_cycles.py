@@ -205,17 +205,17 @@ def test_the_solver_defaults_are_one_set():
 
 
 def test_pairs_that_flip_between_stick_and_slip_three_times_are_broken():
-    """newmark._StickFlips: a pair whose stick flag changed at three iterations (not necessarily
+    """cycles.StickFlips: a pair whose stick flag changed at three iterations (not necessarily
     consecutive) is listed as broken; the change from the first iterate (the predictor) to the second
     is not counted; one change, a pair that joins late, or a pair that leaves is not listed."""
     from vemdem.contact.model import ContactHistory
-    from vemdem.solver.newmark import _StickFlips
+    from vemdem.solver.cycles import StickFlips
 
     def h(keys, stick):
         return ContactHistory(np.array(keys, np.int64), np.zeros((len(keys), 2)), np.zeros((len(keys), 3)),
                               np.array(stick, bool))  # fmt: skip
 
-    flips = _StickFlips()
+    flips = StickFlips()
     assert flips.times == 3 and flips.skip_first
     flips.update(h([1, 2, 3, 4], [1, 1, 1, 1]))
     flips.update(h([1, 2, 3, 4], [0, 1, 1, 1]))  # 1 changes at the first update: the predictor's miss
@@ -230,7 +230,7 @@ def test_pairs_that_flip_between_stick_and_slip_three_times_are_broken():
 
 
 def test_pairs_whose_damping_switches_three_times_go_on_undamped():
-    """newmark._DampingFlips: a pair is damped at an iterate where its dissipative force is not zero
+    """cycles.DampingFlips: a pair is damped at an iterate where its dissipative force is not zero
     (the no-adhesion clamp zeroes damping and friction together); a pair whose damping switched on or
     off at three iterates, the first update's change not counted, is listed, read from the records'
     features whatever their order in the contact result."""
@@ -238,7 +238,7 @@ def test_pairs_whose_damping_switches_three_times_go_on_undamped():
 
     from vemdem.contact.model import pair_keys
     from vemdem.contact.pairs import FEATURE_A, FEATURE_B, INT_COLS, KIND
-    from vemdem.solver.newmark import _DampingFlips
+    from vemdem.solver.cycles import DampingFlips
 
     ints = np.zeros((3, INT_COLS), np.int64)
     ints[:, KIND], ints[:, FEATURE_A], ints[:, FEATURE_B] = 1, [7, 3, 5], [11, 12, 13]
@@ -250,7 +250,7 @@ def test_pairs_whose_damping_switches_three_times_go_on_undamped():
         order = list(order)
         return SimpleNamespace(ints=ints[order], local_forces=(np.zeros((3, 6, 3)), local[order]))
 
-    flips = _DampingFlips()
+    flips = DampingFlips()
     assert flips.times == 3 and flips.skip_first
     flips.update(result([1, 1, 1]))
     flips.update(result([0, 1, 1]))  # the predictor's miss: not counted
@@ -260,7 +260,7 @@ def test_pairs_whose_damping_switches_three_times_go_on_undamped():
     flips.update(result([1, 0, 1]))  # the first and the second record: their third counted change
     assert flips.broken.tolist() == sorted(keys[:2].tolist())
     without = SimpleNamespace(ints=ints, local_forces=(np.zeros((3, 6, 3)),))  # no friction law: nothing to hold
-    fresh = _DampingFlips()
+    fresh = DampingFlips()
     for _ in range(5):
         fresh.update(without)
     assert fresh.broken.tolist() == []

@@ -269,3 +269,52 @@ def test_contact_points_on_a_wall_plane_lie_under_the_vertices():
     points = contact_points(x_all, ints, floats)
     feet = x[ints[:, 5]] * np.array([1.0, 1.0, 0.0])
     np.testing.assert_allclose(points, feet, atol=1e-12)
+
+
+@pytest.mark.parametrize("rules", [True, False])
+def test_the_implicit_rigid_step_holds_cycling_pairs_like_the_flexible_one(monkeypatch, rules):
+    """RigidNewmark takes the flexible integrator's break_stick_cycles and hold_damping_cycles
+    (solver/cycles.py): the pairs the step's flip counters list reach the contact law as `slipping`
+    and `undamped`, and the step reports how many. Without them a 500-grain corner collapse from
+    rest (docs/results.md, "Flexible grains in the same corner") failed to converge at every step
+    down to 1e-8 s. Here the counters are made to list every pair from their first update on."""
+    import vemdem.solver.rigid_implicit as ri
+    from vemdem.solver.cycles import DampingFlips, StickFlips
+
+    class Listed(StickFlips):
+        def update(self, history):
+            super().update(history)
+            self.broken = np.asarray(history.keys, np.int64)
+
+    class Undamped(DampingFlips):
+        def update(self, cr):
+            super().update(cr)
+            self.broken = np.asarray(cr.trial_history.keys, np.int64)
+
+    monkeypatch.setattr(ri, "StickFlips", Listed)
+    monkeypatch.setattr(ri, "DampingFlips", Undamped)
+    mu_s, mu_d = 0.6, 0.5
+    law, _ = default_contact_laws(SIZE, MATERIAL.E, MATERIAL.density, 9.81, mu_s, mu_d)
+    grain = cube(SIZE).translated((0.0, 0.0, 0.5 * SIZE + 0.5 * law.activation_gap))
+    floor = PlaneWall(np.zeros(3), np.array([0.0, 0.0, 1.0]), name="floor")
+    theta = np.arctan(0.9)  # above the friction angle: the cube slides
+    scene = rigid_scene([grain], [floor], 9.81 * np.array([np.sin(theta), 0.0, -np.cos(theta)]), (mu_s, mu_d), 0.5)
+    options = SolverOptions(integrator="implicit", break_stick_cycles=rules, hold_damping_cycles=rules)
+    integrator = make_integrator(options, scene)
+    state = integrator.initial_state()
+    seen = []
+    evaluate = scene.contact.evaluate
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs.get("slipping"), kwargs.get("undamped")))
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(scene.contact, "evaluate", spy)
+    state, info = integrator.integrator.step(state, 1e-5)
+    assert info.n_contacts == 4 and len(seen) >= 2
+    if rules:
+        assert info.broken_pairs == info.undamped_pairs == 4
+        assert all(len(s) == len(u) == 4 for s, u in seen[1:])  # listed from the first update on
+    else:
+        assert info.broken_pairs == info.undamped_pairs == 0
+        assert all(s is None and u is None for s, u in seen)

@@ -162,15 +162,16 @@ SOLVER = {
     ),
     "break_stick_cycles": Field(
         bool, True,
-        doc="implicit, flexible grains: a pair that Newton flips between stick and slip three times in a step is "
-            "judged by mu_d for the rest of it, as a pair whose static friction broke (docs/dynamics.md; without it a "
-            "single such pair rejected the 515-grain implicit pack's steps down to 8e-7 s)",
+        doc="implicit, flexible and rigid grains: a pair that Newton flips between stick and slip three times in a "
+            "step is judged by mu_d for the rest of it, as a pair whose static friction broke (docs/dynamics.md; "
+            "without it a single such pair rejected the 515-grain implicit pack's steps down to 8e-7 s)",
     ),
     "hold_damping_cycles": Field(
         bool, True,
-        doc="implicit, flexible grains: a pair whose normal damping Newton switches on and off three times in a step "
-            "(the no-adhesion clamp at the layer's outer edge) is undamped for the rest of it (docs/dynamics.md; "
-            "without it 14 Newton rejections in the first 0.04 s of the 515-grain mu 0.6/0.5 collapse, with it 1)",
+        doc="implicit, flexible and rigid grains: a pair whose normal damping Newton switches on and off three "
+            "times in a step (the no-adhesion clamp at the layer's outer edge) is undamped for the rest of it "
+            "(docs/dynamics.md; without it 14 Newton rejections in the first 0.04 s of the 515-grain mu 0.6/0.5 "
+            "collapse, with it 1)",
     ),
     "rotated_tangent": Field(
         float, 1e-4, non_negative,

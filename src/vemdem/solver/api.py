@@ -174,7 +174,9 @@ class RigidImplicit(RigidCentral):
         self.scene = scene
         self.control = _control(options)
         self.integrator = RigidNewmark(scene, ExplicitParameters(mass_damping=options.mass_damping),
-                                       beta=options.beta, gamma=options.gamma)  # fmt: skip
+                                       beta=options.beta, gamma=options.gamma,
+                                       break_stick_cycles=options.break_stick_cycles,
+                                       hold_damping_cycles=options.hold_damping_cycles)  # fmt: skip
 
     def advance(self, state, t_end, on_step, stats):
         # the step to try next lives in the (checkpointed) control between calls, not cut short

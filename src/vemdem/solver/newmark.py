@@ -35,6 +35,7 @@ from ..contact.model import FrozenPairs, PenetrationError, pair_keys
 from ..model.bodies import InvertedElementError
 from ..model.motion import RigidRetraction, rigid_part
 from ..model.scene import Scene
+from .cycles import DampingFlips, StickFlips
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
@@ -363,8 +364,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     full_before, dx_before = False, np.inf
     corrections = []
     frozen, key_trail = None, []
-    flips = _StickFlips() if params.break_stick_cycles else None
-    damping = _DampingFlips() if params.hold_damping_cycles else None
+    flips = StickFlips() if params.break_stick_cycles else None
+    damping = DampingFlips() if params.hold_damping_cycles else None
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
     shift = a1 + params.mass_damping * a4  # the Newton matrix's mass term: K + shift M
@@ -496,55 +497,6 @@ def step_dissipation(state: State, r1: np.ndarray, v1: np.ndarray, power1: float
     grains = 0.5 * dt * float(np.sum((state.v + v1) * ((1.0 - gamma) * r0 + gamma * r1)))
     walls = 0.5 * dt * ((state.power - float(np.sum(r0 * state.v))) + (power1 - float(np.sum(r1 * v1))))
     return grains + walls
-
-
-class _Flips:
-    """The pairs whose flag (stick; damped) changed between Newton iterates (sorted pair keys):
-    `broken` lists those that changed at `times` iterations of the step. The change from the first
-    iterate to the second is not counted when `skip_first`: it is the predictor's miss, not a cycle."""
-
-    skip_first = True
-    times = 3
-
-    def __init__(self):
-        self.keys = self.flags = None
-        self.flipped = [np.zeros(0, np.int64)]
-        self.broken = np.zeros(0, np.int64)
-        self.seen = 0
-
-    def update_flags(self, keys: np.ndarray, flags: np.ndarray) -> None:
-        """keys sorted and unique, flags the pairs' booleans at this iterate."""
-        self.seen += 1
-        if self.keys is not None and not (self.skip_first and self.seen == 2):
-            _, a, b = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
-            flipped = self.keys[a[self.flags[a] != flags[b]]]
-            if len(flipped):
-                self.flipped.append(flipped)
-                every, counts = np.unique(np.concatenate(self.flipped), return_counts=True)
-                self.broken = every[counts >= self.times]
-        self.keys, self.flags = keys, flags
-
-
-class _StickFlips(_Flips):
-    """Pairs whose stick flag changed at three iterates (NewmarkParameters.break_stick_cycles)."""
-
-    def update(self, history) -> None:
-        self.update_flags(history.keys, history.stick)
-
-
-class _DampingFlips(_Flips):
-    """Pairs whose normal damping switched on or off at three iterates (hold_damping_cycles): the
-    no-adhesion clamp F_N = max(f_n + F_d, 0) zeroes a pair's damping and friction where the pair
-    separates faster than f_n / c_n, and at the outer edge of the layer, where f_n is 1e-12 N and
-    the damping 2 zeta sqrt(k m) |g_n dot| 1e-7 N, Newton's iterates crossed that kink both ways
-    every other iteration (docs/dynamics.md). A pair is damped where its dissipative force is not 0."""
-
-    def update(self, cr) -> None:
-        if len(cr.local_forces) < 2 or not len(cr.ints):
-            return self.update_flags(np.zeros(0, np.int64), np.zeros(0, bool))
-        keys, first = np.unique(pair_keys(cr.ints), return_index=True)
-        damped = np.any(cr.local_forces[1][first] != 0.0, axis=(1, 2))
-        self.update_flags(keys, damped)
 
 
 def _forcing(params: NewmarkParameters, eta: float, r_before: float | None, r_now: float) -> float:

@@ -32,7 +32,9 @@ LU up to a few hundred unknowns, SuperLU above (solver/linear/direct.py).
 Step control: the explicit loop's (solver/explicit.py advance_explicit) with the step grown by
 1.5 after a step that converged in few iterations, up to dt_max, and bounded by the approach
 limits of the explicit integrator (no pair closes more than a quarter of its gap in one step),
-which keep the barrier out of reach; a step whose Newton does not converge is halved.
+which keep the barrier out of reach; a step whose Newton does not converge is halved. A pair
+whose friction or damping flips at three iterates is held on one branch for the rest of the step
+(solver/cycles.py, `[solver] break_stick_cycles` and `hold_damping_cycles`, as for flexible grains).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from ..model.scene import Scene
 from .explicit import ExplicitParameters
 from .linear.direct import superlu
 from .rigid import RigidExplicit, _force_and_torque, angular_velocity, free_rotation
+from .cycles import DampingFlips, StickFlips
 from .state import State, StepInfo, StepRejected
 
 DENSE_UNKNOWNS = 600
@@ -90,9 +93,15 @@ class RigidNewmark(RigidExplicit):
     grow = 1.5
 
     def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters(), beta: float = 0.3025,
-                 gamma: float = 0.6, max_iterations: int = 25, tolerance: float = 1e-6):  # fmt: skip
+                 gamma: float = 0.6, max_iterations: int = 25, tolerance: float = 1e-6,
+                 break_stick_cycles: bool = True, hold_damping_cycles: bool = True):  # fmt: skip
+        """break_stick_cycles, hold_damping_cycles: the flexible integrator's rules for a pair whose
+        friction flips between stick and slip, or whose damping switches on and off, at three
+        iterates of a step (solver/newmark.py NewmarkParameters): the law has no root there, and
+        halving the step does not remove a jump of the force."""
         super().__init__(scene, params)
         self.beta, self.gamma = beta, gamma
+        self.break_stick_cycles, self.hold_damping_cycles = break_stick_cycles, hold_damping_cycles
         self.max_iterations, self.tolerance = max_iterations, tolerance
         self.next_dt = np.inf  # set from the step control at every advance (checkpointed there)
         b = self.bodies
@@ -103,9 +112,11 @@ class RigidNewmark(RigidExplicit):
         return min(self.next_dt, self.approach_limit(state, ints, floats))
 
     # ------------------------------------------------------------------ Newton's pieces
-    def _loads_with_tangent(self, x, v, centre, velocity, momentum, t, history, a4):
+    def _loads_with_tangent(self, x, v, centre, velocity, momentum, t, history, a4, flips=None, damping=None):
         b = self.bodies
-        cr = self.scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v, a4=a4, tangent=True)
+        cr = self.scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v, a4=a4, tangent=True,
+                                         slipping=None if flips is None else flips.broken,
+                                         undamped=None if damping is None else damping.broken)  # fmt: skip
         F, T = _force_and_torque(x, -cr.force, centre, b.vertex_ptr)
         Fd, Td = _force_and_torque(x, -cr.dissipative, centre, b.vertex_ptr)
         alpha = self.params.mass_damping
@@ -175,6 +186,8 @@ class RigidNewmark(RigidExplicit):
         dc = h * v_n + 0.5 * h * h * a_n
         L_star = L_n + 0.5 * h * T_n
         du = None
+        flips = StickFlips() if self.break_stick_cycles else None
+        damping = DampingFlips() if self.hold_damping_cycles else None
         for iteration in range(1, self.max_iterations + 1):
             c = c_n + dc
             R = free_rotation(R_n, L_star, b.moments, h)
@@ -184,9 +197,14 @@ class RigidNewmark(RigidExplicit):
             momentum = L_n + h * ((1.0 - gamma) * T_n + gamma * T_kin)
             x, v = self.vertex_motion(c, R, velocity, momentum)
             try:
-                F, T, Fd, Td, cr = self._loads_with_tangent(x, v, c, velocity, momentum, t1, state.history, a4)
+                F, T, Fd, Td, cr = self._loads_with_tangent(x, v, c, velocity, momentum, t1, state.history, a4,
+                                                            flips, damping)  # fmt: skip
             except PenetrationError as exc:
                 raise StepRejected(str(exc)) from None
+            if flips is not None:
+                flips.update(cr.trial_history)
+            if damping is not None:
+                damping.update(cr)
             r_c = m * a1 - F
             r_L = T_kin - T
             if self._converged(r_c, r_L) or self._stalled(du):
@@ -209,4 +227,6 @@ class RigidNewmark(RigidExplicit):
                   "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
         new = State(t1, x, v, np.zeros_like(x), cr.trial_history, state.dissipated - work, power, bodies)
         self.next_dt = h * self.grow if iteration <= self.easy_iterations else h
-        return new, StepInfo(iteration, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr)
+        return new, StepInfo(iteration, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr,
+                             broken_pairs=0 if flips is None else len(flips.broken),
+                             undamped_pairs=0 if damping is None else len(damping.broken))  # fmt: skip
