@@ -275,7 +275,7 @@ def test_contact_points_on_a_wall_plane_lie_under_the_vertices():
 def test_the_implicit_rigid_step_holds_cycling_pairs_like_the_flexible_one(monkeypatch, rules):
     """RigidNewmark takes the flexible integrator's break_stick_cycles and hold_damping_cycles
     (solver/cycles.py): the pairs the step's flip counters list reach the contact law as `slipping`
-    and `undamped`, and the step reports how many. Without them a 500-grain corner collapse from
+    and `undamped`, and the step reports how many, into the run's counts (summary.json). Without them a 500-grain corner collapse from
     rest (docs/results.md, "Flexible grains in the same corner") failed to converge at every step
     down to 1e-8 s. Here the counters are made to list every pair from their first update on."""
     import vemdem.solver.rigid_implicit as ri
@@ -311,10 +311,14 @@ def test_the_implicit_rigid_step_holds_cycling_pairs_like_the_flexible_one(monke
 
     monkeypatch.setattr(scene.contact, "evaluate", spy)
     state, info = integrator.integrator.step(state, 1e-5)
-    assert info.n_contacts == 4 and len(seen) >= 2
+    calls = seen[:]  # this step's
+    assert info.n_contacts == 4 and len(calls) >= 2
+    _, stats = integrator.advance(state, state.t + 1e-4, None, RunStats())  # summary.json's counts
     if rules:
         assert info.broken_pairs == info.undamped_pairs == 4
-        assert all(len(s) == len(u) == 4 for s, u in seen[1:])  # listed from the first update on
+        assert all(len(s) == len(u) == 4 for s, u in calls[1:])  # listed from the first update on
+        assert stats.stick_break_steps == stats.damping_hold_steps == stats.accepted > 0
     else:
         assert info.broken_pairs == info.undamped_pairs == 0
-        assert all(s is None and u is None for s, u in seen)
+        assert all(s is None and u is None for s, u in seen)  # the advance's too
+        assert stats.stick_break_steps == stats.damping_hold_steps == 0 and stats.accepted > 0

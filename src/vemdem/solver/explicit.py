@@ -248,8 +248,7 @@ def advance_explicit(integrator: ExplicitIntegrator, state: State, t_end: float,
         state = new
         ints, floats = info.ints, info.floats
         control.dt = h
-        stats.accepted += 1
-        stats.newton_iterations += info.iterations  # 1 for an explicit step
+        stats.accept(info)  # one iteration for an explicit step; the rigid implicit step's Newton counts
         if on_step is not None:
             on_step(state, info, h)
     return state, stats

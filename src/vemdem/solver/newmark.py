@@ -646,14 +646,7 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
             continue
         state = new
         limit = step_limit(scene, state, control)
-        stats.accepted += 1
-        stats.newton_iterations += info.iterations
-        stats.krylov_iterations += info.krylov_iterations
-        stats.frozen_pair_steps += info.frozen_pairs > 0
-        stats.stick_break_steps += info.broken_pairs > 0
-        stats.damping_hold_steps += info.undamped_pairs > 0
-        stats.tangent_blocks += info.tangent_blocks
-        stats.exact_tangent_blocks += info.exact_blocks
+        stats.accept(info)
         control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
         if control.easy_streak >= control.grow_after and h == control.dt:
             control.dt = min(control.dt * control.grow, control.dt_max)

@@ -92,6 +92,17 @@ class RunStats:
     exact_tangent_blocks: int = 0  # implicit: of those, the exact element tangent's (rotated_tangent)
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
+    def accept(self, info: StepInfo) -> None:
+        """Count an accepted step and what its Newton needed (an explicit step: one iteration, no rules)."""
+        self.accepted += 1
+        self.newton_iterations += info.iterations
+        self.krylov_iterations += info.krylov_iterations
+        self.frozen_pair_steps += info.frozen_pairs > 0
+        self.stick_break_steps += info.broken_pairs > 0
+        self.damping_hold_steps += info.undamped_pairs > 0
+        self.tangent_blocks += info.tangent_blocks
+        self.exact_tangent_blocks += info.exact_blocks
+
     def reject(self, exc: BaseException) -> None:
         """Count a rejected step under its cause."""
         self.rejected += 1
