@@ -278,7 +278,7 @@ def test_the_implicit_rigid_step_holds_cycling_pairs_like_the_flexible_one(monke
     and `undamped`, and the step reports how many, into the run's counts (summary.json). Without them a 500-grain corner collapse from
     rest (docs/results.md, "Flexible grains in the same corner") failed to converge at every step
     down to 1e-8 s. Here the counters are made to list every pair from their first update on."""
-    import vemdem.solver.rigid_implicit as ri
+    import vemdem.solver.cycles as cycles
     from vemdem.solver.cycles import DampingFlips, StickFlips
 
     class Listed(StickFlips):
@@ -291,8 +291,8 @@ def test_the_implicit_rigid_step_holds_cycling_pairs_like_the_flexible_one(monke
             super().update(cr)
             self.broken = np.asarray(cr.trial_history.keys, np.int64)
 
-    monkeypatch.setattr(ri, "StickFlips", Listed)
-    monkeypatch.setattr(ri, "DampingFlips", Undamped)
+    monkeypatch.setattr(cycles, "StickFlips", Listed)  # what HeldPairs makes
+    monkeypatch.setattr(cycles, "DampingFlips", Undamped)
     mu_s, mu_d = 0.6, 0.5
     law, _ = default_contact_laws(SIZE, MATERIAL.E, MATERIAL.density, 9.81, mu_s, mu_d)
     grain = cube(SIZE).translated((0.0, 0.0, 0.5 * SIZE + 0.5 * law.activation_gap))

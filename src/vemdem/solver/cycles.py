@@ -57,3 +57,27 @@ class DampingFlips(Flips):
         keys, first = np.unique(pair_keys(cr.ints), return_index=True)
         damped = np.any(cr.local_forces[1][first] != 0.0, axis=(1, 2))
         self.update_flags(keys, damped)
+
+
+class HeldPairs:
+    """One step's two rules together (break_stick_cycles, hold_damping_cycles; either may be off):
+    what contact.evaluate is to hold, updated from each iterate's contact result."""
+
+    def __init__(self, break_stick: bool, hold_damping: bool):
+        self.stick = StickFlips() if break_stick else None
+        self.damping = DampingFlips() if hold_damping else None
+
+    def held(self) -> dict:
+        """contact.evaluate's `slipping` and `undamped` (None: that rule is off)."""
+        return {"slipping": None if self.stick is None else self.stick.broken,
+                "undamped": None if self.damping is None else self.damping.broken}  # fmt: skip
+
+    def update(self, cr) -> None:
+        if self.stick is not None:
+            self.stick.update(cr.trial_history)
+        if self.damping is not None:
+            self.damping.update(cr)
+
+    def counts(self) -> tuple[int, int]:
+        """(pairs held to mu_d, pairs held undamped): StepInfo's broken_pairs and undamped_pairs."""
+        return tuple(0 if rule is None else len(rule.broken) for rule in (self.stick, self.damping))

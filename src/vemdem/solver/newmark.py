@@ -35,7 +35,7 @@ from ..contact.model import FrozenPairs, PenetrationError, pair_keys
 from ..model.bodies import InvertedElementError
 from ..model.motion import RigidRetraction, rigid_part
 from ..model.scene import Scene
-from .cycles import DampingFlips, StickFlips
+from .cycles import HeldPairs
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
@@ -364,8 +364,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     full_before, dx_before = False, np.inf
     corrections = []
     frozen, key_trail = None, []
-    flips = StickFlips() if params.break_stick_cycles else None
-    damping = DampingFlips() if params.hold_damping_cycles else None
+    held = HeldPairs(params.break_stick_cycles, params.hold_damping_cycles)
     g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
     shift = a1 + params.mass_damping * a4  # the Newton matrix's mass term: K + shift M
@@ -377,8 +376,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         try:
             el = scene.bodies.evaluate(x, tangent=True, mass_shift=shift, rotated_strain=params.rotated_tangent)
             cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen,
-                                  slipping=None if flips is None else flips.broken,
-                                  undamped=None if damping is None else damping.broken)  # fmt: skip
+                                  **held.held())  # fmt: skip
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
         if el.rotated is not None:
@@ -386,10 +384,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
             exact_blocks += len(el.rotated) - int(np.count_nonzero(el.rotated))
         if params.freeze_cycles and tw == t1:
             frozen = _freeze_cycling(key_trail, cr.ints, cr.floats, frozen)
-        if flips is not None:
-            flips.update(cr.trial_history)
-        if damping is not None:
-            damping.update(cr)
+        held.update(cr)
         inertia = M @ (acc.ravel() + params.mass_damping * vel.ravel())
         R = inertia + el.force.ravel() + cr.force.ravel() - f_grav
         at_end = tw == t1
@@ -457,9 +452,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     vel = a4 * du + a5 * state.v + a6 * state.a
     try:
         el = scene.bodies.evaluate(x)
-        cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4,
-                              slipping=None if flips is None else flips.broken,
-                              undamped=None if damping is None else damping.broken)  # fmt: skip
+        cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4, **held.held())
     except (InvertedElementError, PenetrationError) as exc:
         raise StepRejected(str(exc)) from None
     missed = missed_pairs(contact, x, t1, candidates)
@@ -471,8 +464,8 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     dissipated = state.dissipated + step_dissipation(state, dissipative, vel, power, dt, gam)
     new = State(t1, x, vel, acc, cr.trial_history, dissipated, power, {"dissipative": dissipative})
     info = StepInfo(it, cr.n_contacts, cr.energy, el.total_energy, cr.wall_reactions, cr.ints, cr.floats, cr, krylov,
-                    0 if frozen is None else len(frozen.keys), 0 if flips is None else len(flips.broken),
-                    0 if damping is None else len(damping.broken), tangent_blocks, exact_blocks)  # fmt: skip
+                    0 if frozen is None else len(frozen.keys), *held.counts(), tangent_blocks,
+                    exact_blocks)  # fmt: skip
     return new, info
 
 

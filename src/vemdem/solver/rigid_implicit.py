@@ -47,10 +47,10 @@ from numba import njit
 from ..contact.forces import rigid_pair_blocks
 from ..contact.model import PenetrationError
 from ..model.scene import Scene
+from .cycles import HeldPairs
 from .explicit import ExplicitParameters
 from .linear.direct import superlu
 from .rigid import RigidExplicit, _force_and_torque, angular_velocity, free_rotation
-from .cycles import DampingFlips, StickFlips
 from .state import State, StepInfo, StepRejected
 
 DENSE_UNKNOWNS = 600
@@ -112,11 +112,10 @@ class RigidNewmark(RigidExplicit):
         return min(self.next_dt, self.approach_limit(state, ints, floats))
 
     # ------------------------------------------------------------------ Newton's pieces
-    def _loads_with_tangent(self, x, v, centre, velocity, momentum, t, history, a4, flips=None, damping=None):
+    def _loads_with_tangent(self, x, v, centre, velocity, momentum, t, history, a4, held: HeldPairs):
         b = self.bodies
         cr = self.scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v, a4=a4, tangent=True,
-                                         slipping=None if flips is None else flips.broken,
-                                         undamped=None if damping is None else damping.broken)  # fmt: skip
+                                         **held.held())  # fmt: skip
         F, T = _force_and_torque(x, -cr.force, centre, b.vertex_ptr)
         Fd, Td = _force_and_torque(x, -cr.dissipative, centre, b.vertex_ptr)
         alpha = self.params.mass_damping
@@ -186,8 +185,7 @@ class RigidNewmark(RigidExplicit):
         dc = h * v_n + 0.5 * h * h * a_n
         L_star = L_n + 0.5 * h * T_n
         du = None
-        flips = StickFlips() if self.break_stick_cycles else None
-        damping = DampingFlips() if self.hold_damping_cycles else None
+        held = HeldPairs(self.break_stick_cycles, self.hold_damping_cycles)
         for iteration in range(1, self.max_iterations + 1):
             c = c_n + dc
             R = free_rotation(R_n, L_star, b.moments, h)
@@ -197,14 +195,10 @@ class RigidNewmark(RigidExplicit):
             momentum = L_n + h * ((1.0 - gamma) * T_n + gamma * T_kin)
             x, v = self.vertex_motion(c, R, velocity, momentum)
             try:
-                F, T, Fd, Td, cr = self._loads_with_tangent(x, v, c, velocity, momentum, t1, state.history, a4,
-                                                            flips, damping)  # fmt: skip
+                F, T, Fd, Td, cr = self._loads_with_tangent(x, v, c, velocity, momentum, t1, state.history, a4, held)
             except PenetrationError as exc:
                 raise StepRejected(str(exc)) from None
-            if flips is not None:
-                flips.update(cr.trial_history)
-            if damping is not None:
-                damping.update(cr)
+            held.update(cr)
             r_c = m * a1 - F
             r_L = T_kin - T
             if self._converged(r_c, r_L) or self._stalled(du):
@@ -227,6 +221,6 @@ class RigidNewmark(RigidExplicit):
                   "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
         new = State(t1, x, v, np.zeros_like(x), cr.trial_history, state.dissipated - work, power, bodies)
         self.next_dt = h * self.grow if iteration <= self.easy_iterations else h
+        broken, undamped = held.counts()
         return new, StepInfo(iteration, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr,
-                             broken_pairs=0 if flips is None else len(flips.broken),
-                             undamped_pairs=0 if damping is None else len(damping.broken))  # fmt: skip
+                             broken_pairs=broken, undamped_pairs=undamped)  # fmt: skip
