@@ -231,4 +231,5 @@ def test_summary_is_json(settled):
     written = json.loads((out / "summary.json").read_text())
     assert written["n_grains"] == summary["n_grains"]
     assert written["newton_iterations_per_step"] == written["n_newton_iterations"] / written["n_steps"]
+    assert written["integrator"] == "explicit" and written["n_newton_iterations"] == 0  # explicit steps solve nothing
     assert written["n_energy_gain_steps"] == 0

@@ -204,7 +204,7 @@ class ExplicitIntegrator:
             {"dissipative": damping},
         )
         info = StepInfo(
-            1,
+            0,  # no Newton: summary.json's n_newton_iterations counts implicit steps' iterations only
             cr.n_contacts,
             cr.energy,
             strain,

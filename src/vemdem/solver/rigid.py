@@ -242,7 +242,7 @@ class RigidExplicit(ExplicitIntegrator):
         bodies = {"centre": centre, "rotation": rotation, "velocity": velocity, "momentum": momentum,
                   "force": F, "torque": T, "damping_force": Fd, "damping_torque": Td}  # fmt: skip
         new = State(t1, x, v, np.zeros_like(x), cr.trial_history, state.dissipated - work, power, bodies)
-        info = StepInfo(1, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr)
+        info = StepInfo(0, cr.n_contacts, cr.energy, 0.0, cr.wall_reactions, cr.ints, cr.floats, cr)
         return new, info
 
 

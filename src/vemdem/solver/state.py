@@ -93,7 +93,7 @@ class RunStats:
     rejections: dict = field(default_factory=dict)  # rejected steps by cause (rejection_cause)
 
     def accept(self, info: StepInfo) -> None:
-        """Count an accepted step and what its Newton needed (an explicit step: one iteration, no rules)."""
+        """Count an accepted step and what its Newton needed (an explicit step: no iterations, no rules)."""
         self.accepted += 1
         self.newton_iterations += info.iterations
         self.krylov_iterations += info.krylov_iterations
