@@ -32,6 +32,8 @@ class InterfaceLaw:
     switch_factor: float = 0.3  # gbb / gbar
     barrier_exponent: float = -2.0  # n2
     edge_fade: bool = False  # weigh edge-edge records out near their edges' ends (contact/fade.py)
+    # formulation 4.4's last clause: a vertex-edge pair yields to two eligible edge-edge pairs at its vertex
+    edge_edge_rule: bool = False
 
     def __post_init__(self):
         checks = [

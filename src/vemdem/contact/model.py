@@ -279,10 +279,11 @@ class ContactModel:
         """Eligible pairs within the activation gap (or within `reach`, to look ahead)."""
         x_all = self.all_positions(x, t)
         gbar = self.law.activation_gap if reach is None else reach
+        rule = self.law.edge_edge_rule
         if reach is None and self.feature_list is not None:
-            ints, floats = self.feature_list.find(x_all, candidates, self.topology, gbar)
+            ints, floats = self.feature_list.find(x_all, candidates, self.topology, gbar, ee_rule=rule)
         else:
-            ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
+            ints, floats = find_contacts(x_all, candidates, self.topology, gbar, ee_rule=rule)
         if len(floats) and floats[:, GAP].min() <= self.touching_gap:
             c = int(np.argmin(floats[:, GAP]))
             raise PenetrationError(f"grains {ints[c, GRAIN_A]} and {ints[c, GRAIN_B]} touch (gap {floats[c, GAP]:.3g} m, "

@@ -9,9 +9,12 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   by the vertex-face pairs of the planar region
     vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
                   eligible vertex-face pair with either face at the edge, a concave edge only to
-                  both (edge-edge pairs at the vertex no longer remove it: that rule switched
-                  the record on inside the layer as they left, and with the edge-edge fade,
-                  fade.py, it would leave the spot unsupported)
+                  both; with `[contact] edge_edge_rule` (formulation 4.4, the paper's hierarchy) also
+                  to two or more eligible edge-edge pairs between the edge and edges at the vertex.
+                  Off by default since session 23: the rule switches the record on inside the
+                  layer as they leave (an energy jump), and with the edge-edge fade, fade.py, it
+                  would leave the spot unsupported; off, one spot can count up to three times,
+                  which moves the angle of repose (docs/contact.md)
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 
@@ -153,7 +156,9 @@ def _ee_gap(x, ea, eb, edges, edge_type, gbar):
 
 
 @njit(cache=True)
-def _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
+def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule):
+    """The vertex-edge hierarchy (module docstring); with ee_rule also formulation 4.4's last clause:
+    the pair yields to two or more eligible edge-edge pairs between e and edges at p."""
     fa = edge_faces[e, 0]
     fb = edge_faces[e, 1]
     ca = _vf_gap(x, p, fa, faces, gbar)[0] >= 0.0
@@ -163,7 +168,13 @@ def _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
             return False
     elif ca or cb:
         return False
-    return True
+    if not ee_rule:
+        return True
+    linked = 0
+    for k in range(v_edge_ptr[p], v_edge_ptr[p + 1]):
+        if _ee_gap(x, v_edges[k], e, edges, edge_type, gbar)[0] >= 0.0:
+            linked += 1
+    return linked < 2
 
 
 @njit(cache=True)
@@ -380,9 +391,11 @@ def ee_record(x, ea, eb, A, B, edges, edge_type, gbar, ints, floats, n, cap):
 
 
 @njit(cache=True)
-def ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap):
+def ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule, ints, floats,
+              n, cap):  # fmt: skip
     d, t = _ve_gap(x, p, e, edges, gbar)
-    if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
+    if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar,
+                                          ee_rule):  # fmt: skip
         n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
                     np.int64(-1), t, 0.0, d)  # fmt: skip
     return n
@@ -399,7 +412,8 @@ def vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_ed
 
 @njit(cache=True)
 def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats):  # fmt: skip
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats,
+                        ee_rule):  # fmt: skip
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
@@ -422,7 +436,8 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
         for p in verts:
             for e in eds:
                 if _point_near_box(x, p, ebox, e, gbar):
-                    n = ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap)
+                    n = ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar,
+                                  ee_rule, ints, floats, n, cap)  # fmt: skip
     for p in vA:
         for q in vB:
             n = vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar, ints, floats, n,
@@ -432,17 +447,20 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
 
 @njit(parallel=True, cache=True)
 def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-               v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
+               v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, cap, ints, floats, counts,
+               ee_rule):  # fmt: skip
     for k in prange(len(grain_pairs)):
         counts[k] = grain_pair_contacts(
             x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
             edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox,
-            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
+            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap], ee_rule,
         )  # fmt: skip
 
 
-def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
-    """Eligible contact pairs of the candidate grain pairs, as (ints, floats) record arrays.
+def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32,
+                  ee_rule: bool = False):  # fmt: skip
+    """Eligible contact pairs of the candidate grain pairs, as (ints, floats) record arrays; ee_rule:
+    the hierarchy's edge-edge clause (InterfaceLaw.edge_edge_rule).
 
     Each grain pair gets `capacity` slots; when one overflows, the search is rerun with room
     for the largest count (fixed-capacity buffers keep the compiled kernel free of Python lists).
@@ -461,6 +479,7 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
             x, grain_pairs, gbar, topo.grain_vertex_ptr, topo.grain_face_ptr, topo.grain_edge_ptr, topo.faces,
             topo.edges, topo.edge_faces, topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces,
             topo.vertex_edge_ptr, topo.vertex_edges, glo, ghi, fbox, ebox, capacity, ints, floats, counts,
+            bool(ee_rule),
         )  # fmt: skip
         if m == 0 or counts.max() <= capacity:
             break
