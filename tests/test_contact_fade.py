@@ -184,19 +184,9 @@ def test_a_vertex_over_an_edge_keeps_its_vertex_edge_record_beside_fading_edge_e
     assert res.energy < 1.5 * phi_ve  # the faded edge-edge records add little
 
 
-def test_the_fade_is_off_by_default_and_the_config_key_turns_it_on():
-    import tomllib
-
-    from vemdem.contact.defaults import default_contact_laws
-    from vemdem.scenarios.registry import checked_config, example_text
-
+def test_the_fade_is_off_by_default():
+    """(The config key: test_contact_law.test_contact_switches_are_off_by_default_and_keys_turn_them_on.)"""
     assert InterfaceLaw(GBAR, 1e9).edge_fade is False
-    assert default_contact_laws(1e-3, 90e9, 2200.0)[0].edge_fade is False
-    assert default_contact_laws(1e-3, 90e9, 2200.0, edge_fade=True)[0].edge_fade is True
-    cfg = tomllib.loads(example_text("drop"))
-    assert checked_config(dict(cfg))[0]["contact"]["edge_fade"] is False
-    cfg.setdefault("contact", {})["edge_fade"] = True
-    assert checked_config(cfg)[0]["contact"]["edge_fade"] is True
     model, x = wedge_over_edge(0.5e-3 - 0.4 * GBAR)
     faded = model.evaluate(x, 0.0, model.search(x, 0.0))
     model.law_params = InterfaceLaw(GBAR, 1e9).packed()  # the same scene without the fade

@@ -398,19 +398,10 @@ def test_pair_inverse_mass_is_the_eigenvalue_of_the_pair_spring(rng):
 
 
 def test_the_edge_edge_rule_is_a_contact_key_the_model_passes_on():
-    """`[contact] edge_edge_rule`: off by default, on from the config, and the contact model's
-    searches (full and feature list) apply its law's rule: the records of find_contacts with it."""
-    import tomllib
-    from vemdem.contact.defaults import default_contact_laws
+    """`[contact] edge_edge_rule` (the key: test_contact_law): the contact model's searches, full
+    and by feature list, apply its law's rule: the records of find_contacts with it."""
     from vemdem.contact.model import ContactModel
-    from vemdem.scenarios.registry import checked_config, example_text
 
-    assert default_contact_laws(1e-3, 90e9, 2200.0)[0].edge_edge_rule is False
-    assert default_contact_laws(1e-3, 90e9, 2200.0, edge_edge_rule=True)[0].edge_edge_rule is True
-    cfg = tomllib.loads(example_text("drop"))
-    assert checked_config(dict(cfg))[0]["contact"]["edge_edge_rule"] is False
-    cfg.setdefault("contact", {})["edge_edge_rule"] = True
-    assert checked_config(cfg)[0]["contact"]["edge_edge_rule"] is True
     a = sand_grain(seed=502, size=1.0)
     b = sand_grain(seed=602, size=0.8).rotated(rotation_matrix(np.array([0.3, -1.1, 0.4])))
     b = _place_at_gap(a, b, np.array([0.0, 0.0, 1.0]), 0.05 * GBAR)
