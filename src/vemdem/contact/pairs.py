@@ -14,7 +14,7 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   Off by default since session 23: the rule switches the record on inside the
                   layer as they leave (an energy jump), and with the edge-edge fade, fade.py, it
                   would leave the spot unsupported; off, one spot can count up to three times,
-                  which moves the angle of repose (docs/contact.md)
+                  which the angle of repose does not show beyond its scatter (docs/contact.md)
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 
