@@ -5,6 +5,7 @@
     python benchmarks/bench_paper.py --only pack,high --out runs/
     python benchmarks/bench_paper.py --implicit --no-vtk --out real/     # the real-density runs (issue 14)
     python benchmarks/bench_paper.py --implicit --only mid --pack-state rpack/state.npz
+    python benchmarks/bench_paper.py --implicit --only compression-pack --lid-turn 0.22 --pack-state rpack/state.npz
 
 Each run is the `paper-*` example run through the library as `vemdem run` would, in OUT/<name>;
 `compression-pack` is `paper-compression` started from the pack (the paper's own setup: the lid
@@ -13,6 +14,8 @@ or from `--pack-state` (docs/results.md times the real-density collapses from a 
 settled at the real density: `paper-pack` with `[model] grains = "rigid"` and `mass_scaling = 1`).
 `--implicit` runs the `paper-*-implicit` examples instead: the paper's own method, implicit Newmark
 at the real density, with no mass scaling. `--no-vtk` leaves the frames out (the docs' wall times).
+`--lid-turn E` turns the lids at compressive strain E of their start height instead of the paper's
+4.9 mm (docs/results.md, "Cycles turned before the jam").
 A run whose summary.json already exists is read, not rerun (so an interrupted sweep goes on
 where it stopped; an interrupted run itself resumes from its checkpoint). Prints one row per run:
 grains, simulated time, accepted steps, wall seconds, steps/s, grain-steps/s and the run's
@@ -47,7 +50,7 @@ HEADLINES = ("pack_height", "packing_fraction", "angle_of_repose_deg", "angle_of
 
 
 def config_for(name: str, out: Path, grains: int | None, implicit: bool = False, pack_state: Path | None = None,
-               vtk: bool = True) -> tuple:  # fmt: skip
+               vtk: bool = True, lid_turn: float | None = None) -> tuple:  # fmt: skip
     """The checked config of one run and its scenario module (registry.checked_config)."""
     raw = tomllib.loads(example_text(RUNS[name] + ("-implicit" if implicit else "")))
     if name in ("high", "mid", "low", "compression-pack"):
@@ -62,6 +65,8 @@ def config_for(name: str, out: Path, grains: int | None, implicit: bool = False,
             raw["pack"]["n_grains"] = grains
             raw["pack"]["box"] = {"width": 5.5e-3, "depth": 5.5e-3}
             raw["lid"]["start"], raw["lid"]["end"] = 3.5e-3, 2.4e-3  # a few grains stand lower
+    if lid_turn is not None and "lid" in raw:
+        raw["lid"]["end"] = round(raw["lid"]["start"] * (1.0 - lid_turn), 9)  # to the nm: 5.6 mm as one types it
     return checked_config(raw)
 
 
@@ -92,7 +97,11 @@ def main(argv=None) -> None:
     p.add_argument("--pack-state", type=Path,
                    help="start the collapses and compression-pack from this state.npz [OUT/pack/state.npz]")
     p.add_argument("--no-vtk", action="store_true", help="write no VTK frames (the wall times of docs/results.md)")
+    p.add_argument("--lid-turn", type=float, metavar="E",
+                   help="turn the lids at compressive strain E (0 < E < 1) of their start height [the paper's 4.9 mm]")
     args = p.parse_args(argv)
+    if args.lid_turn is not None and not 0.0 < args.lid_turn < 1.0:
+        p.error(f"--lid-turn: a strain between 0 and 1, got {args.lid_turn}")
     names = [n.strip() for n in args.only.split(",") if n.strip()]
     unknown = set(names) - set(RUNS)
     if unknown:
@@ -108,7 +117,7 @@ def main(argv=None) -> None:
           f"{'-implicit' if args.implicit else ''} examples)")  # fmt: skip
     print(f"| run | grains | simulated s | steps | wall s | steps/s | grain-steps/s | wall / {target / 3600:.0f} h | figures |")
     print("|---|---|---|---|---|---|---|---|---|")
-    options = dict(implicit=args.implicit, pack_state=args.pack_state, vtk=not args.no_vtk)
+    options = dict(implicit=args.implicit, pack_state=args.pack_state, vtk=not args.no_vtk, lid_turn=args.lid_turn)
     for name in names:
         print(row(name, run_one(name, args.out, args.grains, **options), target), flush=True)
 

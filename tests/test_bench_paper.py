@@ -46,3 +46,22 @@ def test_a_missing_pack_state_is_refused_in_one_line(bench, tmp_path, capsys):
         bench.main(["--implicit", "--only", "mid", "--pack-state", str(tmp_path / "none.npz"), "--out", str(tmp_path)])
     assert exit_.value.code == 2
     assert "--pack-state: no file" in capsys.readouterr().err
+
+
+def test_lid_turn_moves_only_the_lids_turning_point(bench, tmp_path):
+    for name in bench.RUNS:
+        plain, _ = bench.config_for(name, tmp_path, None, implicit=True)
+        turned, _ = bench.config_for(name, tmp_path, None, implicit=True, lid_turn=0.22)
+        if "lid" in plain:
+            assert turned["lid"]["end"] == pytest.approx(plain["lid"]["start"] * 0.78), name
+            assert turned["lid"]["end"] != plain["lid"]["end"], name
+            turned["lid"]["end"] = plain["lid"]["end"]
+        assert turned == plain, name
+
+
+@pytest.mark.parametrize("strain", ["0", "1.2", "-0.1"])
+def test_a_lid_turn_outside_0_1_is_refused(bench, tmp_path, capsys, strain):
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(["--only", "compression-pack", "--lid-turn", strain, "--out", str(tmp_path)])
+    assert exit_.value.code == 2
+    assert "--lid-turn: a strain between 0 and 1" in capsys.readouterr().err
