@@ -9,8 +9,8 @@ import numpy as np
 SCRIPT = Path(__file__).resolve().parents[1] / "docs" / "data" / "angles_by_friction.py"
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("angles_by_friction", SCRIPT)
+def _module(script: Path = SCRIPT):
+    spec = importlib.util.spec_from_file_location(script.stem, script)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -42,9 +42,7 @@ def test_the_lid_curves_say_what_the_docs_say(tmp_path):
     strain) both forces rise through 0.03-1 pack weights, the real-density one 1-5 times the other;
     past 22 % the real-density pack's jam carries tens to thousands of pack weights, the
     mass-scaled one under 15."""
-    spec = importlib.util.spec_from_file_location("lid515_real_vs_scaled", LID_SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _module(LID_SCRIPT)
     from vemdem.analysis.force_strain import read_force_strain_csv
 
     curves = {}
@@ -69,9 +67,7 @@ def test_the_turned_lid_cycles_say_what_the_docs_say(tmp_path):
     work and both packs spring back 0.5-3.5 % strain; turned at 20 and 22 % the two agree (residual
     strains within 0.6 %, lost fractions within 0.1); turned at 24 % they part, the real-density
     pack springing back at least 1 % strain less."""
-    spec = importlib.util.spec_from_file_location("lid515_turned", LID_SCRIPT.parent / "lid515_turned.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _module(LID_SCRIPT.parent / "lid515_turned.py")
     data = module.cycles()
     assert module.TURNS == (20, 22, 24)
     for turn in module.TURNS:
