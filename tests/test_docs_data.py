@@ -63,23 +63,23 @@ def test_the_lid_curves_say_what_the_docs_say(tmp_path):
 
 def test_the_turned_lid_cycles_say_what_the_docs_say(tmp_path):
     """docs/results.md, "Cycles turned before the jam": at every turn the real-density lid carries
-    more than twice the mass-scaled one's pack weights, both cycles lose 70-95 % of their loading
-    work and both packs spring back 0.5-3.5 % strain; turned at 20 and 22 % the two agree (residual
-    strains within 0.6 %, lost fractions within 0.1); turned at 24 % they part, the real-density
-    pack springing back at least 1 % strain less."""
+    more than twice the mass-scaled one's pack weights, both cycles lose 55-95 % of their loading
+    work and both packs spring back 0.5-5 % strain; turned at 20 and 22 % the two agree (residual
+    strains within 0.6 %, lost fractions within 0.1); turned at 24 and 26 % they part, the
+    real-density pack springing back at least 1 % strain less and losing a larger share."""
     module = _module(LID_SCRIPT.parent / "lid515_turned.py")
     data = module.cycles()
-    assert module.TURNS == (20, 22, 24)
+    assert module.TURNS == (20, 22, 24, 26)
     for turn in module.TURNS:
         real, scaled = data[turn, "real"]["figures"], data[turn, "scaled"]["figures"]
         assert real["peak_force"] > 2 * scaled["peak_force"], turn
         lost = [f["hysteresis_energy"] / f["loading_work"] for f in (real, scaled)]
         back = [turn / 100 - f["residual_strain"] for f in (real, scaled)]
-        assert all(0.7 < x < 0.95 for x in lost) and all(0.005 < x < 0.035 for x in back), (turn, lost, back)
+        assert all(0.55 < x < 0.95 for x in lost) and all(0.005 < x < 0.05 for x in back), (turn, lost, back)
         if turn < 24:
             assert abs(lost[0] - lost[1]) < 0.1 and abs(back[0] - back[1]) < 0.006, (turn, lost, back)
         else:
-            assert back[1] - back[0] > 0.01, (turn, back)
+            assert back[1] - back[0] > 0.01 and lost[0] > lost[1] + 0.1, (turn, lost, back)
     out = tmp_path / "turned.png"
     module.main(out)
     assert out.stat().st_size > 20_000

@@ -28,7 +28,7 @@ from vemdem.analysis.force_strain import cycle_figures, read_force_strain_csv  #
 
 HERE = Path(__file__).resolve().parent
 START_HEIGHT = 7e-3  # m: the lid's start, the strain's reference height
-TURNS = (20, 22, 24)  # % strain where the lid turns
+TURNS = (20, 22, 24, 26)  # % strain where the lid turns
 # the residual strain: where the unloading force falls below this many pack weights, one threshold for
 # both runs (summary.json's is 1e-3 of each run's own peak, at the jam's peaks a hundred times higher
 # in pack weights for the real-density run than for the mass-scaled one)
@@ -65,7 +65,8 @@ def cycles() -> dict[tuple[int, str], dict]:
 
 def main(out: Path) -> None:
     data = cycles()
-    fig, axes = plt.subplots(1, len(TURNS), figsize=(4.8 * len(TURNS), 4.4), dpi=120)
+    fig, axes = plt.subplots(2, len(TURNS) // 2, figsize=(10, 8.4), dpi=120)
+    axes = axes.ravel()
     for ax, turn in zip(axes, TURNS):
         for method, _, label, colour in METHODS:
             run = data[turn, method]
@@ -91,8 +92,9 @@ def main(out: Path) -> None:
         ax.set_title(f"the lid turned at {turn} % strain")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper left")
-    axes[0].set_ylabel("lid force / pack weight")
-    fig.suptitle("whole lid cycles on the 515-grain 6 mm pack (0.9 mm grains, mu 0.15), turned before the jam")
+    for ax in axes[:: len(TURNS) // 2]:
+        ax.set_ylabel("lid force / pack weight")
+    fig.suptitle("whole lid cycles on the 515-grain 6 mm pack (0.9 mm grains, mu 0.15), turned at 20-26 % strain")
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
