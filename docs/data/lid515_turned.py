@@ -24,7 +24,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from vemdem.analysis.force_strain import cycle_figures, read_force_strain_csv  # noqa: E402
+from vemdem.analysis.force_strain import cycle_branches, cycle_figures, read_force_strain_csv  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 START_HEIGHT = 7e-3  # m: the lid's start, the strain's reference height
@@ -47,8 +47,9 @@ def _pack_weight() -> float:
 
 
 def cycles() -> dict[tuple[int, str], dict]:
-    """{(turn, method): {strain, weights, phase, figures}}: each cycle's curve in pack weights and its
-    figures (cycle_figures) with the works in pack weights times START_HEIGHT."""
+    """{(turn, method): {branches, figures}}: each cycle's loading and unloading (strain, pack weights),
+    the unloading from the turning point (cycle_branches), and its figures (cycle_figures) with the
+    works in pack weights times START_HEIGHT."""
     weight = _pack_weight()
     out = {}
     for turn in TURNS:
@@ -59,7 +60,7 @@ def cycles() -> dict[tuple[int, str], dict]:
                                     zero_fraction=RESIDUAL_PACK_WEIGHTS / weights.max())  # fmt: skip
             for key in ("loading_work", "unloading_work", "hysteresis_energy"):
                 figures[key] /= START_HEIGHT
-            out[turn, method] = {"phase": phase, "strain": strain, "weights": weights, "figures": figures}
+            out[turn, method] = {"branches": cycle_branches(phase, strain, weights), "figures": figures}
     return out
 
 
@@ -69,16 +70,10 @@ def main(out: Path) -> None:
     axes = axes.ravel()
     for ax, turn in zip(axes, TURNS):
         for method, _, label, colour in METHODS:
-            run = data[turn, method]
-            load = run["phase"] == "load"
-            # the unloading drawn from the turning point, so the two branches meet
-            unload = load.copy()
-            unload[: load.sum() - 1] = False
-            unload |= ~load
-            f = run["figures"]
-            ax.plot(100 * run["strain"][load], run["weights"][load], "-", color=colour, lw=1.4,
-                    label=f"{label}, loading")  # fmt: skip
-            ax.plot(100 * run["strain"][unload], run["weights"][unload], "--", color=colour, lw=1.2,
+            load_e, load_w, unload_e, unload_w = data[turn, method]["branches"]
+            f = data[turn, method]["figures"]
+            ax.plot(100 * load_e, load_w, "-", color=colour, lw=1.4, label=f"{label}, loading")
+            ax.plot(100 * unload_e, unload_w, "--", color=colour, lw=1.2,
                     label=f"unloading: {f['hysteresis_energy'] / f['loading_work']:.0%} of the work lost, "
                     f"residual strain {100 * f['residual_strain']:.1f} %")  # fmt: skip
             print(f"turned at {turn} %, {label}: peak {f['peak_force']:.3g} pack weights, loading work "

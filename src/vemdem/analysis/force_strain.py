@@ -42,7 +42,7 @@ LOAD, UNLOAD = "load", "unload"
 ZERO_FRACTION = 1e-3
 
 
-def _branches(phase, strain, force) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def cycle_branches(phase, strain, force) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Loading (strain, force) and unloading (strain, force), the latter from the turning point."""
     phase = np.asarray(phase, dtype=str)
     strain = np.asarray(strain, dtype=float)
@@ -83,7 +83,7 @@ def cycle_figures(phase, strain, force, height0: float, zero_fraction: float = Z
     of one load-unload cycle; height0 (m) turns strain into lid displacement."""
     if not height0 > 0:
         raise ValueError(f"height0 must be > 0, got {height0}")
-    load_e, load_f, unload_e, unload_f = _branches(phase, strain, force)
+    load_e, load_f, unload_e, unload_f = cycle_branches(phase, strain, force)
     peak = float(max(load_f.max(), unload_f.max()))
     if not peak > 0:
         raise ValueError(f"the lid never carried a compressive force (peak {peak} N)")
@@ -139,7 +139,7 @@ def plot_force_strain(phase, strain, force, path: Path, figures: dict[str, float
     cycle_figures), when given, in a text box, and the residual strain as a dotted line."""
     from .plots import plt  # the package's Agg backend
 
-    load_e, load_f, unload_e, unload_f = _branches(phase, strain, force)
+    load_e, load_f, unload_e, unload_f = cycle_branches(phase, strain, force)
     fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
     # loading out and unloading back close the loop along the strain axis (zero force)
     ax.fill(np.r_[load_e, unload_e] * 100, np.r_[load_f, unload_f], color="0.85", label="hysteresis")
