@@ -73,6 +73,17 @@ def test_residual_strain_threshold_lateness_is_as_documented():
     assert quadratic["residual_strain"] == pytest.approx(E_R + late, abs=E_MAX / N)
 
 
+def test_absolute_residual_strain_is_where_the_force_falls_to_it():
+    """F = K2 (e - E_R)^2 falls to F0 at e = E_R + sqrt(F0 / K2), whatever the peak; to a row's
+    linear interpolation of the quadratic."""
+    for f0 in (0.0, 1.0, 25.0):
+        figures = cycle_figures(*cycle(quadratic_unloading), H0, zero_force=f0)
+        assert figures["residual_strain_absolute"] == pytest.approx(E_R + math.sqrt(f0 / K2), abs=E_MAX / N)
+    assert "residual_strain_absolute" not in cycle_figures(*cycle(quadratic_unloading), H0)
+    with pytest.raises(ValueError, match="zero_force"):
+        cycle_figures(*cycle(quadratic_unloading), H0, zero_force=-1.0)
+
+
 def test_partial_unloading_keeps_the_stored_energy():
     """Stopping at 0.07 before the force is back to zero: the last strain is the residual one,
     and the hysteresis holds the elastic energy still stored there."""

@@ -176,6 +176,19 @@ def test_lid_compression_cycle(tmp_path, settled):
     assert summary["hysteresis_energy"] > 0
     assert summary["peak_force"] == pytest.approx(force.max())
     assert 0 <= summary["residual_strain"] <= strain.max()
+    # the absolute reading: the grains' weight (mass scaling included) from their reference volumes; the first
+    # unloading row at or below 0.01 of it ends the interval the crossing lies in
+    weight = sum(g.volume for g in state.grains) * cfg["material"]["density"] * cfg["solver"]["mass_scaling"] * 9.81
+    assert summary["pack_weight"] == pytest.approx(weight, rel=1e-9)
+    assert summary["residual_force"] == pytest.approx(0.01 * weight, rel=1e-12)
+    rows = np.flatnonzero(unload)
+    below = rows[force[rows] <= 0.01 * weight]
+    if len(below):
+        first = below[0]
+        lo, hi = sorted((strain[first - 1], strain[first]))
+        assert lo <= summary["residual_strain_absolute"] <= hi
+    else:
+        assert summary["residual_strain_absolute"] == strain[-1]
     # the lid's work is in the energy books (history.csv wall_work, summed step by step), and they
     # close (measured -0.6 %). Over the cycle that work is about the area between the loading and
     # unloading curves, which force_strain measures from the 40 frames alone (measured: 0.0383

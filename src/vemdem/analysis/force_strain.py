@@ -25,6 +25,13 @@ lid does not hold the reading back; small, because the force usually reaches zer
 tangentially (each contact's penalty is quadratic in its overlap): for
 F ~ (e - e_r)^n the reading comes late by zero_fraction^(1/n) of the unloading range,
 3 % of it for n = 2 and 0.1 % for n = 1. zero_fraction=0 gives the first exact zero.
+
+Absolute residual strain: where the unloading force first falls to a given force (`zero_force`,
+lid_compression passes RESIDUAL_PACK_WEIGHTS = 0.01 of the pack's weight). One force for runs
+whose peaks differ by orders of magnitude in pack weights: a pack at the real density jams at
+hundreds of pack weights where the same pack with mass scaling 1e6 carries a few, so 1e-3 of each
+run's own peak reads the two unloadings at forces a hundred times apart (docs/results.md, "Cycles
+turned before the jam").
 """
 
 from __future__ import annotations
@@ -40,6 +47,7 @@ from ..io.results import CsvLog
 HEADER = ("phase", "strain", "force")
 LOAD, UNLOAD = "load", "unload"
 ZERO_FRACTION = 1e-3
+RESIDUAL_PACK_WEIGHTS = 0.01
 
 
 def cycle_branches(phase, strain, force) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -78,9 +86,11 @@ def _residual_strain(strain: np.ndarray, force: np.ndarray, threshold: float) ->
     return float(strain[i - 1] + t * (strain[i] - strain[i - 1]))
 
 
-def cycle_figures(phase, strain, force, height0: float, zero_fraction: float = ZERO_FRACTION) -> dict[str, float]:
+def cycle_figures(phase, strain, force, height0: float, zero_fraction: float = ZERO_FRACTION,
+                  zero_force: float | None = None) -> dict[str, float]:  # fmt: skip
     """peak_force (N), loading_work, unloading_work, hysteresis_energy (J) and residual_strain
-    of one load-unload cycle; height0 (m) turns strain into lid displacement."""
+    of one load-unload cycle; height0 (m) turns strain into lid displacement. With `zero_force`
+    (N) also residual_strain_absolute: where the unloading force first falls to it."""
     if not height0 > 0:
         raise ValueError(f"height0 must be > 0, got {height0}")
     load_e, load_f, unload_e, unload_f = cycle_branches(phase, strain, force)
@@ -89,13 +99,18 @@ def cycle_figures(phase, strain, force, height0: float, zero_fraction: float = Z
         raise ValueError(f"the lid never carried a compressive force (peak {peak} N)")
     loading_work = float(trapezoid(load_f, load_e * height0))
     unloading_work = -float(trapezoid(unload_f, unload_e * height0))
-    return {
+    figures = {
         "peak_force": peak,
         "loading_work": loading_work,
         "unloading_work": unloading_work,
         "hysteresis_energy": loading_work - unloading_work,
         "residual_strain": _residual_strain(unload_e, unload_f, zero_fraction * peak),
     }
+    if zero_force is not None:
+        if not zero_force >= 0:
+            raise ValueError(f"zero_force must be >= 0, got {zero_force}")
+        figures["residual_strain_absolute"] = _residual_strain(unload_e, unload_f, zero_force)
+    return figures
 
 
 def write_force_strain_csv(path: Path, phase, strain, force) -> None:

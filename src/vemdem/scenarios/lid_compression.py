@@ -6,7 +6,10 @@ the floor (7 mm), moves down at `lid.speed` to `lid.end` (4.9 mm) and back up at
 strain = (lid.start - lid height) / lid.start, force = the vertical force of the grains on the
 lid (N, positive when pushed up). Outputs in DIR: force_strain.csv (header `phase,strain,force`,
 one row per frame; phase `load` or `unload`), force_strain.png, summary.json (peak_force,
-hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured),
+hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured; also
+pack_weight (N, at the run's density: mass scaling included), residual_force = 0.01 of it and
+residual_strain_absolute, the strain where the unloading force falls to residual_force: one force
+to compare runs whose peaks differ by orders of magnitude in pack weights),
 fluctuations.csv and fluctuations.png (the grains' velocity fluctuations and the inertia number
 per frame: how quasi-static the cycle was, analysis.fluctuations) and the scene outputs
 (walls.csv has the lid's force at every frame; `--resume` continues a run).
@@ -20,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.fluctuations import fluctuation_figures, lid_fluctuations, plot_fluctuations, write_fluctuations_csv
-from ..analysis.force_strain import cycle_figures, plot_force_strain, write_force_strain_csv
+from ..analysis.force_strain import RESIDUAL_PACK_WEIGHTS, cycle_figures, plot_force_strain, write_force_strain_csv
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_walls
@@ -64,6 +67,11 @@ def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict
     return fluctuation_figures(rows)
 
 
+def pack_weight(scene) -> float:
+    """The grains' weight (N) at the scene's density, mass scaling included."""
+    return float(np.sum(scene.bodies.body_mass) * np.linalg.norm(scene.gravity))
+
+
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -85,13 +93,16 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                       progress=progress)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
+    weight = pack_weight(scene)
     try:
-        figures = cycle_figures(phase, strain, force, cfg["lid"]["start"])
+        figures = cycle_figures(phase, strain, force, cfg["lid"]["start"], zero_force=RESIDUAL_PACK_WEIGHTS * weight)
     except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
         figures = {"cycle_error": str(exc)}
     plot_force_strain(phase, strain, force, out_dir / "force_strain.png", figures if "peak_force" in figures else None)
     summary = run_summary("lid_compression", scene, result, t_start)
     summary.update(figures)
+    summary["pack_weight"] = weight
+    summary["residual_force"] = RESIDUAL_PACK_WEIGHTS * weight
     summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
