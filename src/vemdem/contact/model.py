@@ -291,6 +291,20 @@ class ContactModel:
         plane_ints, plane_floats = self._plane_pairs(x_all, t, gbar)
         return x_all, np.vstack([ints, plane_ints]), np.vstack([floats, plane_floats])
 
+    def grain_contacts(self, x: np.ndarray, t: float):
+        """(grain_a, grain_b, gap_vectors) of the grain-to-grain records at x (walls left out):
+        gap_vectors(field) is p_A - p_B of every record at its material points, for positions or any
+        other field (N, 3) on the grains' vertices (analysis.spring_back)."""
+        _, ints, floats = self.pairs(x, t, self.search(x, t))
+        mine = (ints[:, GRAIN_A] < self.n_grains) & (ints[:, GRAIN_B] < self.n_grains)
+        ints, floats = np.ascontiguousarray(ints[mine]), np.ascontiguousarray(floats[mine])
+
+        def gap_vectors(field: np.ndarray) -> np.ndarray:
+            p = pair_points(np.ascontiguousarray(field, dtype=float), ints, floats)
+            return p[:, 0] - p[:, 1]
+
+        return ints[:, GRAIN_A].copy(), ints[:, GRAIN_B].copy(), gap_vectors
+
     @property
     def touching_gap(self) -> float:
         """Gaps at or below this are contact for every purpose (TOUCHING_GAP)."""

@@ -24,18 +24,21 @@ import numpy as np
 
 from ..analysis.fluctuations import fluctuation_figures, lid_fluctuations, plot_fluctuations, write_fluctuations_csv
 from ..analysis.force_strain import RESIDUAL_PACK_WEIGHTS, cycle_figures, plot_force_strain, write_force_strain_csv
+from ..analysis.spring_back import PARTS, branch_strain_split
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_walls
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import wall_force_record, write_json
+from ..io.state import StateFileError, friction_arrays, load_state, save_state
 from ..solver.api import make_integrator
 from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.LID_COMPRESSION
+TURN_STATE = "turn_state.npz"  # the pack at the lid's turning point (io.state format)
 
 
 def lid_wall(lid: dict, centre) -> tuple[PlaneWall, float]:
@@ -67,6 +70,23 @@ def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict
     return fluctuation_figures(rows)
 
 
+def spring_back(scene, turn_state: Path, x_end: np.ndarray) -> dict:
+    """The zz component of the best-fit strain of the grains' branch vectors from the lid's turning
+    point to the end of the cycle ("branch_strain", positive: the pack grew) and its exact split into
+    the grains' deformation, the contact layer's gaps, the contacts' tangential motion and the
+    grains' rotations (analysis.spring_back), over the grain-to-grain contacts at the turn."""
+    try:
+        turn = load_state(turn_state)
+        t = float(turn.meta["time"])
+        records = scene.contact.grain_contacts(turn.x, t)
+        parts = branch_strain_split(scene.bodies.reference, scene.bodies.vertex_ptr, turn.x, x_end, *records)
+    except (StateFileError, ValueError) as exc:
+        return {"error": str(exc)}
+    out = {"records": len(records[0]), "branch_strain": float(parts["total"][2, 2])}
+    out.update({name: float(parts[name][2, 2]) for name in PARTS})
+    return out
+
+
 def pack_weight(scene) -> float:
     """The grains' weight (N) at the scene's density, mass scaling included."""
     return float(np.sum(scene.bodies.body_mass) * np.linalg.norm(scene.gravity))
@@ -87,10 +107,18 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     every = 0.5 * duration / cfg["lid"]["frames"]
     identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
+    if not resume_here:  # never another run's turning point
+        (out_dir / TURN_STATE).unlink(missing_ok=True)
+
+    def keep_turn(frame, state):
+        if frame == cfg["lid"]["frames"]:
+            save_state(out_dir / TURN_STATE, initial.grains, state.x, state.v, {**meta, "time": state.t},
+                       friction_arrays(state.history))  # fmt: skip
+
     result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
                       identity=identity, x0=initial.x, v0=initial.v,
                       friction0=initial.friction, resume=resume_here,
-                      progress=progress)  # fmt: skip
+                      progress=progress, on_frame=keep_turn)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
     weight = pack_weight(scene)
@@ -103,6 +131,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary.update(figures)
     summary["pack_weight"] = weight
     summary["residual_force"] = RESIDUAL_PACK_WEIGHTS * weight
+    summary["spring_back"] = spring_back(scene, out_dir / TURN_STATE, result.state.x)
     summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
