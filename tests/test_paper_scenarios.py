@@ -205,19 +205,22 @@ def test_lid_compression_cycle(tmp_path, settled):
     np.testing.assert_array_equal(np.isfinite(fl["inertia_number"]), force[:-1] > 0)
     assert summary["fluctuations"]["inertia_number_min"] == fl["inertia_number"].min()
     assert (tmp_path / "fluctuations.png").stat().st_size > 10_000
-    # the pack at the turn (turn_state.npz) and what it gave back by the cycle's end (analysis.spring_back):
-    # the branch vectors' best-fit vertical strain against the slope of the grains' own rise with their
-    # height, a fit of the centroids alone (measured: -0.132 against -0.133: this small pack at mu 0.15
-    # slumps further once the lid has lifted, its contacts sliding and its gaps opening)
-    turn = load_state(tmp_path / "turn_state.npz")
+    # the pack at the turn (turn_state.npz), where the lid let go of it (release_state.npz: the first
+    # unloading frame at or below residual_force) and what it gave back between them
+    # (analysis.spring_back): the branch vectors' best-fit vertical strain against the slope of the
+    # grains' own rise with their height, a fit of the centroids alone (measured: 0.035 against 0.041
+    # on these few grains; the two fits weigh the grains differently)
+    turn, release = load_state(tmp_path / "turn_state.npz"), load_state(tmp_path / "release_state.npz")
     assert turn.meta["time"] == pytest.approx((start - end) / 0.05, rel=1e-9)
+    let_go = rows[np.flatnonzero(force[rows] <= 0.01 * weight)[0]]
+    assert release.meta["time"] == pytest.approx(turn.meta["time"] + (strain.max() - strain[let_go]) * start / 0.05,
+                                                 rel=1e-9)  # fmt: skip
     back = summary["spring_back"]
-    assert back["records"] > 0
+    assert back["to"] == "release" and back["records"] > 0
     assert sum(back[k] for k in PARTS) == pytest.approx(back["branch_strain"], abs=1e-12)
-    end_x = np.load(tmp_path / "checkpoint.npz")["x"]
     ptr = np.r_[0, np.cumsum([g.n_vertices for g in turn.grains])]
-    z0, z1 = (np.add.reduceat(x[:, 2], ptr[:-1]) / np.diff(ptr) for x in (turn.x, end_x))
-    assert back["branch_strain"] == pytest.approx(np.polyfit(z0, z1 - z0, 1)[0], rel=0.1)
+    z0, z1 = (np.add.reduceat(x[:, 2], ptr[:-1]) / np.diff(ptr) for x in (turn.x, release.x))
+    assert back["branch_strain"] == pytest.approx(np.polyfit(z0, z1 - z0, 1)[0], rel=0.25)
 
 
 def test_lid_above_the_pack_is_required(tmp_path, settled):

@@ -55,9 +55,9 @@ class Run:
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
              identity: RunIdentity, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
              stop=None, control=None, on_frame=None) -> Run:  # fmt: skip
-    """`on_frame(frame, state)`, where given, sees every frame once it is written and before its
-    checkpoint, so a run resumed from a frame's checkpoint has been through that frame's hook (the
-    lid keeps its turning point's state)."""
+    """`on_frame(frame, state, contact)`, where given, sees every frame (its state and ContactResult)
+    once it is written and before its checkpoint, so a run resumed from a frame's checkpoint has
+    been through that frame's hook (the lid keeps the states where it turns and lets go)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -119,7 +119,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             last_contact = last["info"].contact
             writer.write(state, last["info"].strain_energy, last_contact, walls.work)
             if on_frame is not None:
-                on_frame(frame, state)
+                on_frame(frame, state, last_contact)
             save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried())
             last["saved"] = time.perf_counter()
             if progress:

@@ -9,7 +9,10 @@ one row per frame; phase `load` or `unload`), force_strain.png, summary.json (pe
 hysteresis_energy, residual_strain, ...; analysis.force_strain says how each is measured; also
 pack_weight (N, at the run's density: mass scaling included), residual_force = 0.01 of it and
 residual_strain_absolute, the strain where the unloading force falls to residual_force: one force
-to compare runs whose peaks differ by orders of magnitude in pack weights),
+to compare runs whose peaks differ by orders of magnitude in pack weights; spring_back, what the
+pack gave back from the turn to where the lid let go of it, split into the grains' deformation,
+the contact layer's gaps and the grains' rearrangement), turn_state.npz and release_state.npz (the
+pack at those two frames, in the `initial_state` format),
 fluctuations.csv and fluctuations.png (the grains' velocity fluctuations and the inertia number
 per frame: how quasi-static the cycle was, analysis.fluctuations) and the scene outputs
 (walls.csv has the lid's force at every frame; `--resume` continues a run).
@@ -39,6 +42,7 @@ from .pack import initial_state_from
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.LID_COMPRESSION
 TURN_STATE = "turn_state.npz"  # the pack at the lid's turning point (io.state format)
+RELEASE_STATE = "release_state.npz"  # the pack where the lid lets go of it (spring_back below)
 
 
 def lid_wall(lid: dict, centre) -> tuple[PlaneWall, float]:
@@ -70,19 +74,45 @@ def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict
     return fluctuation_figures(rows)
 
 
-def spring_back(scene, turn_state: Path, x_end: np.ndarray) -> dict:
-    """The zz component of the best-fit strain of the grains' branch vectors from the lid's turning
-    point to the end of the cycle ("branch_strain", positive: the pack grew) and its exact split into
-    the grains' deformation, the contact layer's gaps, the contacts' tangential motion and the
-    grains' rotations (analysis.spring_back), over the grain-to-grain contacts at the turn."""
+def lid_index(scene, lid: PlaneWall) -> int:
+    """The lid's row in ContactResult.wall_reactions (mesh walls first, then the planes)."""
+    return len(scene.contact.meshes) + [p.name for p in scene.contact.planes].index(lid.name)
+
+
+def _state_keeper(out_dir: Path, grains, meta: dict, n_load: int, lid: int, release_force: float):
+    """The frame hook that keeps the pack at the lid's turn (frame n_load) and where it lets go of
+    the pack: the first unloading frame whose lid force is at most release_force."""
+
+    def keep(frame, state, contact):
+        released = frame > n_load and contact.wall_reactions[lid][2] <= release_force
+        if frame == n_load or (released and not (out_dir / RELEASE_STATE).is_file()):
+            save_state(out_dir / (TURN_STATE if frame == n_load else RELEASE_STATE), grains, state.x, state.v,
+                       {**meta, "time": state.t}, friction_arrays(state.history))  # fmt: skip
+
+    return keep
+
+
+def spring_back(scene, out_dir: Path, end) -> dict:
+    """What the pack gave back from the lid's turn to where the lid let go of it (`to` = "release",
+    release_state.npz), or to the cycle's end (`to` = "end") where it never did: the zz component
+    of the best-fit strain of the grains' branch vectors ("branch_strain", positive: the pack grew)
+    and its exact split into the grains' deformation, the contact layer's gaps, the contacts'
+    tangential motion and the grains' rotations (analysis.spring_back), over the grain-to-grain
+    contacts at the turn."""
     try:
-        turn = load_state(turn_state)
+        turn = load_state(out_dir / TURN_STATE)
         t = float(turn.meta["time"])
+        if (out_dir / RELEASE_STATE).is_file():
+            release = load_state(out_dir / RELEASE_STATE)
+            to, t_to, x_to = "release", float(release.meta["time"]), release.x
+        else:
+            to, t_to, x_to = "end", float(end.t), end.x
         records = scene.contact.grain_contacts(turn.x, t)
-        parts = branch_strain_split(scene.bodies.reference, scene.bodies.vertex_ptr, turn.x, x_end, *records)
+        parts = branch_strain_split(scene.bodies.reference, scene.bodies.vertex_ptr, turn.x, x_to, *records)
     except (StateFileError, ValueError) as exc:
         return {"error": str(exc)}
-    out = {"records": len(records[0]), "branch_strain": float(parts["total"][2, 2])}
+    out = {"to": to, "time_turn": t, "time_to": t_to, "records": len(records[0]),
+           "branch_strain": float(parts["total"][2, 2])}  # fmt: skip
     out.update({name: float(parts[name][2, 2]) for name in PARTS})
     return out
 
@@ -107,21 +137,18 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     every = 0.5 * duration / cfg["lid"]["frames"]
     identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()  # a run stopped in its pack stage starts here
-    if not resume_here:  # never another run's turning point
-        (out_dir / TURN_STATE).unlink(missing_ok=True)
-
-    def keep_turn(frame, state):
-        if frame == cfg["lid"]["frames"]:
-            save_state(out_dir / TURN_STATE, initial.grains, state.x, state.v, {**meta, "time": state.t},
-                       friction_arrays(state.history))  # fmt: skip
-
+    if not resume_here:  # never another run's turn or release
+        for name in (TURN_STATE, RELEASE_STATE):
+            (out_dir / name).unlink(missing_ok=True)
+    weight = pack_weight(scene)
+    keep_states = _state_keeper(out_dir, initial.grains, meta, cfg["lid"]["frames"],
+                                lid_index(scene, lid), RESIDUAL_PACK_WEIGHTS * weight)  # fmt: skip
     result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
                       identity=identity, x0=initial.x, v0=initial.v,
                       friction0=initial.friction, resume=resume_here,
-                      progress=progress, on_frame=keep_turn)  # fmt: skip
+                      progress=progress, on_frame=keep_states)  # fmt: skip
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
-    weight = pack_weight(scene)
     try:
         figures = cycle_figures(phase, strain, force, cfg["lid"]["start"], zero_force=RESIDUAL_PACK_WEIGHTS * weight)
     except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
@@ -131,7 +158,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary.update(figures)
     summary["pack_weight"] = weight
     summary["residual_force"] = RESIDUAL_PACK_WEIGHTS * weight
-    summary["spring_back"] = spring_back(scene, out_dir / TURN_STATE, result.state.x)
+    summary["spring_back"] = spring_back(scene, out_dir, result.state)
     summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
