@@ -13,12 +13,14 @@ import numpy as np
 import pytest
 
 from vemdem.analysis.force_strain import read_force_strain_csv
+from vemdem.analysis.spring_back import PARTS
 from vemdem.config import ConfigError
+from vemdem.config.build import MassScalingWarning
 from vemdem.driver.summary import FrictionSpringWarning
 from vemdem.geometry.packing import pack_height
 from vemdem.geometry.polyhedron import Polyhedron
-from vemdem.analysis.spring_back import PARTS
 from vemdem.io.state import load_state
+from vemdem.scenarios.lid_compression import GRAINS_SPRING_BACK
 from vemdem.scenarios.registry import EXAMPLES, checked_config, example_text
 
 BOX = 5.5e-3
@@ -221,6 +223,10 @@ def test_lid_compression_cycle(tmp_path, settled):
     ptr = np.r_[0, np.cumsum([g.n_vertices for g in turn.grains])]
     z0, z1 = (np.add.reduceat(x[:, 2], ptr[:-1]) / np.diff(ptr) for x in (turn.x, release.x))
     assert back["branch_strain"] == pytest.approx(np.polyfit(z0, z1 - z0, 1)[0], rel=0.25)
+    # a mass-scaled run says when its grains' own elasticity is much of that (lid_compression.GRAINS_SPRING_BACK)
+    said = [w for w in caught if issubclass(w.category, MassScalingWarning) and "elasticity" in str(w.message)]
+    share = back["deformation"] / back["branch_strain"]
+    assert len(said) == int(share > GRAINS_SPRING_BACK and cfg["solver"]["mass_scaling"] != 1.0)
 
 
 def test_lid_above_the_pack_is_required(tmp_path, settled):

@@ -4,17 +4,22 @@ Four unit cubes: one at the origin and one beyond each of its +x, +y and +z face
 the activation gap between them, so that the branch vectors span 3-D.
 """
 
+import warnings
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from vemdem.analysis.spring_back import PARTS, branch_strain_split, rigid_fits
+from vemdem.config.build import MassScalingWarning
 from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.forces import pair_points
 from vemdem.contact.pairs import GAP, GRAIN_A, GRAIN_B
 from vemdem.contact.walls import PlaneWall
 from vemdem.geometry import cube
 from vemdem.model.scene import Scene
+from vemdem.scenarios.lid_compression import warn_if_grains_spring_back
 from vemdem.vem.material import Material
 
 EDGE = 1e-3
@@ -156,3 +161,20 @@ def test_too_few_records_are_refused(scene):
     keep = np.flatnonzero((a == 0) & (b == 3))[:2]
     with pytest.raises(ValueError, match="do not span"):
         branch_strain_split(X, scene.bodies.vertex_ptr, X, X, a[keep], b[keep], lambda f: gap_vectors(f)[keep])
+
+
+@pytest.mark.parametrize("scaling, back, warns", [
+    (1e6, {"branch_strain": 0.04, "deformation": 0.012}, True),
+    (1e6, {"branch_strain": 0.04, "deformation": 0.002}, False),  # 5 %: below GRAINS_SPRING_BACK
+    (1.0, {"branch_strain": 0.04, "deformation": 0.012}, False),  # the real density: nothing scaled
+    (1e6, {"branch_strain": -0.01, "deformation": 0.012}, False),  # the pack gave back nothing
+    (1e6, {"error": "no turn"}, False),
+])  # fmt: skip
+def test_a_mass_scaled_lid_says_when_its_grains_gave_back_much(scaling, back, warns):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warn_if_grains_spring_back(SimpleNamespace(mass_scaling=scaling), back)
+    said = [w for w in caught if issubclass(w.category, MassScalingWarning)]
+    assert len(said) == int(warns)
+    if warns:
+        assert "30%" in str(said[0].message) and "spring_back" in str(said[0].message)
