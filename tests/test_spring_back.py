@@ -178,3 +178,10 @@ def test_a_mass_scaled_lid_says_when_its_grains_gave_back_much(scaling, back, wa
     assert len(said) == int(warns)
     if warns:
         assert "30%" in str(said[0].message) and "spring_back" in str(said[0].message)
+
+
+def test_a_lid_folder_without_its_turn_says_so(tmp_path, scene):
+    from vemdem.scenarios.lid_compression import spring_back
+
+    back = spring_back(scene, tmp_path, SimpleNamespace(t=0.0, x=scene.bodies.reference))
+    assert set(back) == {"error"} and "turn_state.npz" in back["error"]

@@ -103,6 +103,9 @@ def spring_back(scene, out_dir: Path, end) -> dict:
     and its exact split into the grains' deformation, the contact layer's gaps, the contacts'
     tangential motion and the grains' rotations (analysis.spring_back), over the grain-to-grain
     contacts at the turn."""
+    if not (out_dir / TURN_STATE).is_file():
+        return {"error": f"no {TURN_STATE}: the run did not keep the lid's turn (a run resumed from a folder that an "
+                         f"older vemdem wrote)"}  # fmt: skip
     try:
         turn = load_state(out_dir / TURN_STATE)
         t = float(turn.meta["time"])
