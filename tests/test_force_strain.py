@@ -13,6 +13,7 @@ import pytest
 
 from vemdem.analysis.force_strain import (
     ZERO_FRACTION,
+    _figures_text,
     cycle_figures,
     plot_force_strain,
     read_force_strain_csv,
@@ -129,3 +130,15 @@ def test_plot_is_written(tmp_path):
     path = tmp_path / "force_strain.png"
     plot_force_strain(phase, strain, force, path, figures=cycle_figures(phase, strain, force, H0))
     assert path.stat().st_size > 1000
+
+
+def test_the_plot_box_gives_the_spring_back_shares_where_there_are_some(tmp_path):
+    figures = cycle_figures(*cycle(quadratic_unloading), H0)
+    assert len(_figures_text(figures).splitlines()) == 5
+    back = {"branch_strain": 0.04, "deformation": 0.012, "contact_gap": 0.012, "tangential": 0.02, "rotation": -0.004}
+    text = _figures_text({**figures, "spring_back": back})
+    assert "given back 4 %: grains 30%," in text and "contact gaps 30%, rearrangement 40%" in text
+    for nothing in ({"error": "no turn"}, {**back, "branch_strain": -0.01}):
+        assert len(_figures_text({**figures, "spring_back": nothing}).splitlines()) == 5
+    plot_force_strain(*cycle(quadratic_unloading), tmp_path / "fs.png", {**figures, "spring_back": back})
+    assert (tmp_path / "fs.png").stat().st_size > 10_000

@@ -137,21 +137,27 @@ def read_force_strain_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return phase, values[:, 0], values[:, 1]
 
 
-def _figures_text(figures: dict[str, float]) -> str:
-    return "\n".join(
-        [
-            f"peak force {figures['peak_force']:.4g} N",
-            f"loading work {figures['loading_work']:.4g} J",
-            f"unloading work {figures['unloading_work']:.4g} J",
-            f"hysteresis {figures['hysteresis_energy']:.4g} J",
-            f"residual strain {100 * figures['residual_strain']:.3g} %",
-        ]
-    )
+def _figures_text(figures: dict) -> str:
+    lines = [
+        f"peak force {figures['peak_force']:.4g} N",
+        f"loading work {figures['loading_work']:.4g} J",
+        f"unloading work {figures['unloading_work']:.4g} J",
+        f"hysteresis {figures['hysteresis_energy']:.4g} J",
+        f"residual strain {100 * figures['residual_strain']:.3g} %",
+    ]
+    back = figures.get("spring_back", {})
+    if back.get("branch_strain", 0.0) > 0.0:  # analysis.spring_back, as lid_compression reports it
+        share = {k: back[k] / back["branch_strain"] for k in ("deformation", "contact_gap")}
+        rest = 1.0 - share["deformation"] - share["contact_gap"]
+        lines.append(f"given back {100 * back['branch_strain']:.3g} %: grains {share['deformation']:.0%},")
+        lines.append(f"  contact gaps {share['contact_gap']:.0%}, rearrangement {rest:.0%}")
+    return "\n".join(lines)
 
 
-def plot_force_strain(phase, strain, force, path: Path, figures: dict[str, float] | None = None) -> None:
+def plot_force_strain(phase, strain, force, path: Path, figures: dict | None = None) -> None:
     """Loading and unloading curves with the loop between them shaded; `figures` (from
-    cycle_figures), when given, in a text box, and the residual strain as a dotted line."""
+    cycle_figures, and lid_compression's spring_back where it has one), when given, in a text box,
+    and the residual strain as a dotted line."""
     from .plots import plt  # the package's Agg backend
 
     load_e, load_f, unload_e, unload_f = cycle_branches(phase, strain, force)

@@ -174,13 +174,15 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         figures = cycle_figures(phase, strain, force, cfg["lid"]["start"], zero_force=RESIDUAL_PACK_WEIGHTS * weight)
     except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
         figures = {"cycle_error": str(exc)}
-    plot_force_strain(phase, strain, force, out_dir / "force_strain.png", figures if "peak_force" in figures else None)
+    back = spring_back(scene, out_dir, result.state)
+    warn_if_grains_spring_back(scene, back)
+    plot_force_strain(phase, strain, force, out_dir / "force_strain.png",
+                      {**figures, "spring_back": back} if "peak_force" in figures else None)  # fmt: skip
     summary = run_summary("lid_compression", scene, result, t_start)
     summary.update(figures)
     summary["pack_weight"] = weight
     summary["residual_force"] = RESIDUAL_PACK_WEIGHTS * weight
-    summary["spring_back"] = spring_back(scene, out_dir, result.state)
-    warn_if_grains_spring_back(scene, summary["spring_back"])
+    summary["spring_back"] = back
     summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
     summary["initial_state"] = str(path)
