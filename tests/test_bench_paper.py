@@ -65,3 +65,14 @@ def test_a_lid_turn_outside_0_1_is_refused(bench, tmp_path, capsys, strain):
         bench.main(["--only", "compression-pack", "--lid-turn", strain, "--out", str(tmp_path)])
     assert exit_.value.code == 2
     assert "--lid-turn: a strain between 0 and 1" in capsys.readouterr().err
+
+
+def test_a_lid_row_gives_its_spring_back_shares(bench):
+    s = {"wall_seconds": 100.0, "n_steps": 1000, "n_grains": 515, "simulated_time": 0.168, "peak_force": 2.0,
+         "residual_strain_absolute": 0.2285}  # fmt: skip
+    assert "spring-back" not in bench.row("compression-pack", s, 3600.0)
+    s["spring_back"] = {"branch_strain": 0.04, "deformation": 0.012, "contact_gap": 0.012}
+    line = bench.row("compression-pack", s, 3600.0)
+    assert "residual_strain_absolute 0.2285" in line and "spring-back 0.04 (grains 30%, gaps 30%)" in line
+    s["spring_back"] = {"error": "no turn_state.npz"}
+    assert "spring-back" not in bench.row("compression-pack", s, 3600.0)
