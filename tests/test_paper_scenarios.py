@@ -154,6 +154,8 @@ def test_lid_compression_cycle(tmp_path, settled):
     cfg, module = small({"scenario": "lid_compression", "initial_state": str(pack_dir / "state.npz"),
                          "lid": {"start": start, "end": end, "speed": 0.05, "frames": 40},
                          "output": {"vtk": False}})  # fmt: skip
+    for stale in ("turn_state.npz", "release_state.npz"):  # another run's, or broken: a new run never keeps them
+        (tmp_path / stale).write_bytes(b"not a state")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         summary = module.run(cfg, tmp_path)
