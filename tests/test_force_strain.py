@@ -137,7 +137,7 @@ def test_the_plot_box_gives_the_spring_back_shares_where_there_are_some(tmp_path
     assert len(_figures_text(figures).splitlines()) == 5
     back = {"branch_strain": 0.04, "deformation": 0.012, "contact_gap": 0.012, "tangential": 0.02, "rotation": -0.004}
     text = _figures_text({**figures, "spring_back": back})
-    assert "given back 4 %: grains 30%," in text and "contact gaps 30%, rearrangement 40%" in text
+    assert "spring-back 4 %: grains 30%," in text and "contact gaps 30%, rearrangement 40%" in text
     for nothing in ({"error": "no turn"}, {**back, "branch_strain": -0.01}):
         assert len(_figures_text({**figures, "spring_back": nothing}).splitlines()) == 5
     plot_force_strain(*cycle(quadratic_unloading), tmp_path / "fs.png", {**figures, "spring_back": back})

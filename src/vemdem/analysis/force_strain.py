@@ -149,7 +149,7 @@ def _figures_text(figures: dict) -> str:
     if back.get("branch_strain", 0.0) > 0.0:  # analysis.spring_back, as lid_compression reports it
         share = {k: back[k] / back["branch_strain"] for k in ("deformation", "contact_gap")}
         rest = 1.0 - share["deformation"] - share["contact_gap"]
-        lines.append(f"given back {100 * back['branch_strain']:.3g} %: grains {share['deformation']:.0%},")
+        lines.append(f"spring-back {100 * back['branch_strain']:.3g} %: grains {share['deformation']:.0%},")
         lines.append(f"  contact gaps {share['contact_gap']:.0%}, rearrangement {rest:.0%}")
     return "\n".join(lines)
 
