@@ -3,9 +3,9 @@
 
     python docs/data/lid515_spring_back.py [OUT.png]
 
-Reads lid515_spring_back.csv beside this file: for the cycles turned at 20 and 24 % strain (each
-method's run of "Cycles turned before the jam", rerun in session 42 from a rigid pack settled that
-day), the best-fit vertical strain of the grains' branch vectors from the lid's turn to where the
+Reads lid515_spring_back.csv beside this file: for the cycles turned at 20, 22 and 24 % strain
+(each method's run of "Cycles turned before the jam", rerun in session 42 from a rigid pack settled
+that day), the best-fit vertical strain of the grains' branch vectors from the lid's turn to where the
 lid lets go of the pack (`to` = release: the first frame whose force is at most 0.01 pack weights)
 and to the cycle's end (`to` = end, what summary.json's `spring_back` reports), split by
 vemdem.analysis.spring_back into the grains' deformation, the contact layer's gaps, the contacts'
@@ -33,6 +33,7 @@ LABELS = {"deformation": "the grains' deformation", "contact_gap": "the contact 
           "rearrangement": "rearrangement (tangential + rotation)"}  # fmt: skip
 COLOURS = {"deformation": "tab:orange", "contact_gap": "tab:green", "rearrangement": "tab:gray"}
 METHODS = {"real": "real density, implicit", "scaled": "mass scaling 1e6, explicit"}
+TICKS = {"real": "real density\nimplicit", "scaled": "mass scaling 1e6\nexplicit"}
 
 
 def rows(path: Path = HERE / "lid515_spring_back.csv") -> list[dict]:
@@ -53,7 +54,7 @@ def shares(row: dict) -> dict[str, float]:
 
 def main(out: Path) -> None:
     data = [r for r in rows() if r["to"] == "release"]
-    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=120)
+    fig, ax = plt.subplots(figsize=(9, 4.6), dpi=120)
     for i, r in enumerate(data):
         bottom = 0.0
         for k in ("deformation", "contact_gap", "rearrangement"):
@@ -66,7 +67,7 @@ def main(out: Path) -> None:
               f"gaps {s['contact_gap']:.0%}, rearrangement {s['rearrangement']:.0%}; stored at the turn: strain "
               f"{r['strain_energy_turn']:.3g} J, contact {r['contact_energy_turn']:.3g} J")  # fmt: skip
     ax.axhline(0.0, color="k", lw=0.6)
-    ax.set_xticks(range(len(data)), [f"{r['turn']} %\n{METHODS[r['method']]}" for r in data], fontsize=8)
+    ax.set_xticks(range(len(data)), [f"turned at {r['turn']} %\n{TICKS[r['method']]}" for r in data], fontsize=7.5)
     ax.set_ylabel("vertical strain given back, turn to release (%)")
     ax.set_title("What the 515-grain pack gives back when the lid turns", fontsize=10)
     ax.legend(fontsize=8, loc="upper left")
