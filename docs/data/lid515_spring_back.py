@@ -60,7 +60,8 @@ def main(out: Path) -> None:
         for k in ("deformation", "contact_gap", "rearrangement"):
             ax.bar(i, 100 * r[k], bottom=100 * bottom, color=COLOURS[k], label=LABELS[k] if i == 0 else None)
             bottom += r[k]
-        ax.plot(i, 100 * r["lid_rise"] / r["pack_height"], "kv", label="the lid's rise / pack height" if i == 0 else None)
+        lid = "the lid's rise / pack height" if i == 0 else None
+        ax.plot(i, 100 * r["lid_rise"] / r["pack_height"], "kv", label=lid)
         s = shares(r)
         print(f"turned at {r['turn']} %, {METHODS[r['method']]}: branch strain {100 * r['branch_strain']:.2f} % "
               f"(lid {100 * r['lid_rise'] / r['pack_height']:.2f} %), deformation {s['deformation']:.0%}, "
