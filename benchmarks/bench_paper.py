@@ -33,6 +33,7 @@ import time
 import tomllib
 from pathlib import Path
 
+from vemdem.analysis.spring_back import spring_back_shares
 from vemdem.scenarios.registry import checked_config, example_text
 
 RUNS = {
@@ -48,8 +49,6 @@ TARGET_S = {False: 2 * 3600.0, True: 3600.0}  # by --implicit
 HEADLINES = ("pack_height", "packing_fraction", "angle_of_repose_deg", "angle_of_repose_uncertainty_deg",
              "pile_height", "runout", "peak_force", "hysteresis_energy", "residual_strain",
              "residual_strain_absolute")  # fmt: skip
-
-
 
 def config_for(name: str, out: Path, grains: int | None, implicit: bool = False, pack_state: Path | None = None,
                vtk: bool = True, lid_turn: float | None = None) -> tuple:  # fmt: skip
@@ -86,8 +85,8 @@ def row(name: str, s: dict, target: float) -> str:
     steps = s["n_steps"]
     figures = ", ".join(f"{k} {s[k]:.4g}" for k in HEADLINES if isinstance(s.get(k), int | float))
     back = s.get("spring_back", {})
-    if isinstance(back.get("branch_strain"), float) and back["branch_strain"] > 0:
-        share = {k: back[k] / back["branch_strain"] for k in ("deformation", "contact_gap")}
+    share = spring_back_shares(back)
+    if share is not None:
         figures += (f", spring-back {back['branch_strain']:.4g} (grains {share['deformation']:.0%}, "
                     f"gaps {share['contact_gap']:.0%})")  # fmt: skip
     return (f"| {name} | {s['n_grains']} | {s['simulated_time']:.3g} | {steps:,} | {wall:,.0f} | "

@@ -164,10 +164,10 @@ def test_too_few_records_are_refused(scene):
 
 
 @pytest.mark.parametrize("scaling, back, warns", [
-    (1e6, {"branch_strain": 0.04, "deformation": 0.012}, True),
-    (1e6, {"branch_strain": 0.04, "deformation": 0.002}, False),  # 5 %: below GRAINS_SPRING_BACK
-    (1.0, {"branch_strain": 0.04, "deformation": 0.012}, False),  # the real density: nothing scaled
-    (1e6, {"branch_strain": -0.01, "deformation": 0.012}, False),  # the pack gave back nothing
+    (1e6, {"branch_strain": 0.04, "deformation": 0.012, "contact_gap": 0.012}, True),
+    (1e6, {"branch_strain": 0.04, "deformation": 0.002, "contact_gap": 0.02}, False),  # 5 %: below GRAINS_SPRING_BACK
+    (1.0, {"branch_strain": 0.04, "deformation": 0.012, "contact_gap": 0.012}, False),  # the real density: nothing scaled
+    (1e6, {"branch_strain": -0.01, "deformation": 0.012, "contact_gap": 0.0}, False),  # the pack gave back nothing
     (1e6, {"error": "no turn"}, False),
 ])  # fmt: skip
 def test_a_mass_scaled_lid_says_when_its_grains_gave_back_much(scaling, back, warns):

@@ -24,15 +24,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from vemdem.analysis.force_strain import cycle_branches, cycle_figures, read_force_strain_csv  # noqa: E402
+from vemdem.analysis.force_strain import (  # noqa: E402
+    RESIDUAL_PACK_WEIGHTS,
+    cycle_branches,
+    cycle_figures,
+    read_force_strain_csv,
+)
 
 HERE = Path(__file__).resolve().parent
 START_HEIGHT = 7e-3  # m: the lid's start, the strain's reference height
 TURNS = (20, 22, 24, 26)  # % strain where the lid turns
-# the residual strain: where the unloading force falls below this many pack weights, one threshold for
-# both runs (summary.json's is 1e-3 of each run's own peak, at the jam's peaks a hundred times higher
-# in pack weights for the real-density run than for the mass-scaled one)
-RESIDUAL_PACK_WEIGHTS = 0.01
+# the residual strain where the unloading force falls below RESIDUAL_PACK_WEIGHTS pack weights (summary.json's
+# residual_strain_absolute): one threshold for both runs, where its residual_strain, at 1e-3 of each run's own
+# peak, reads the jam's peaks a hundred times higher in pack weights for the real-density run
 METHODS = (
     ("real", 1.0, "real density, implicit (VEM)", "tab:red"),
     ("scaled", 1e6, "mass scaling 1e6, explicit (VEM)", "tab:blue"),

@@ -43,6 +43,7 @@ import numpy as np
 from scipy.integrate import trapezoid
 
 from ..io.results import CsvLog
+from .spring_back import spring_back_shares
 
 HEADER = ("phase", "strain", "force")
 LOAD, UNLOAD = "load", "unload"
@@ -146,11 +147,10 @@ def _figures_text(figures: dict) -> str:
         f"residual strain {100 * figures['residual_strain']:.3g} %",
     ]
     back = figures.get("spring_back", {})
-    if back.get("branch_strain", 0.0) > 0.0:  # analysis.spring_back, as lid_compression reports it
-        share = {k: back[k] / back["branch_strain"] for k in ("deformation", "contact_gap")}
-        rest = 1.0 - share["deformation"] - share["contact_gap"]
+    share = spring_back_shares(back)
+    if share is not None:
         lines.append(f"spring-back {100 * back['branch_strain']:.3g} %: grains {share['deformation']:.0%},")
-        lines.append(f"  contact gaps {share['contact_gap']:.0%}, rearrangement {rest:.0%}")
+        lines.append(f"  contact gaps {share['contact_gap']:.0%}, rearrangement {share['rearrangement']:.0%}")
     return "\n".join(lines)
 
 

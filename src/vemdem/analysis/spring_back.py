@@ -26,6 +26,18 @@ import numpy as np
 PARTS = ("deformation", "contact_gap", "tangential", "rotation")
 
 
+def spring_back_shares(back: dict) -> dict[str, float] | None:
+    """The shares of a spring_back record (lid_compression's summary.json) in its branch strain: the
+    grains' deformation, the contact layer's gaps and the rest, rearrangement (tangential + rotation:
+    the split is exact); None where the pack gave nothing back or the record is an error."""
+    total = back.get("branch_strain")
+    if not isinstance(total, float) or not total > 0.0:
+        return None
+    shares = {k: back[k] / total for k in ("deformation", "contact_gap")}
+    shares["rearrangement"] = 1.0 - shares["deformation"] - shares["contact_gap"]
+    return shares
+
+
 def rigid_fits(reference: np.ndarray, x: np.ndarray, vertex_ptr: np.ndarray):
     """(t (G, 3), R (G, 3, 3), u (N, 3)): every grain's vertex centroid, the rotation of its best
     rigid fit to its reference vertices, and what that fit leaves at each vertex."""

@@ -291,6 +291,11 @@ class ContactModel:
         plane_ints, plane_floats = self._plane_pairs(x_all, t, gbar)
         return x_all, np.vstack([ints, plane_ints]), np.vstack([floats, plane_floats])
 
+    @property
+    def wall_names(self) -> list[str]:
+        """The walls' names in the order of ContactResult.wall_reactions: mesh walls, then planes."""
+        return [m.name for m in self.meshes] + [p.name for p in self.planes]
+
     def grain_contacts(self, x: np.ndarray, t: float):
         """(grain_a, grain_b, gap_vectors) of the grain-to-grain records at x (walls left out):
         gap_vectors(field) is p_A - p_B of every record at its material points, for positions or any

@@ -42,7 +42,7 @@ class FrameWriter:
         self.history = CsvLog(out_dir / "history.csv", HISTORY_HEADER, mode)
         self.grains = CsvLog(out_dir / "grains.csv", GRAINS_HEADER, mode)
         self.walls = CsvLog(out_dir / "walls.csv", WALLS_HEADER, mode)
-        self.wall_names = [m.name for m in scene.contact.meshes] + [p.name for p in scene.contact.planes]
+        self.wall_names = scene.contact.wall_names
         self.vtk = PvdSeries(out_dir, "grains", keep=resume_frames) if vtk else None
         n_grain_faces = scene.contact.topology.grain_face_ptr[scene.n_grains]
         self.faces = scene.contact.topology.faces[:n_grain_faces]

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..analysis.fluctuations import fluctuation_figures, lid_fluctuations, plot_fluctuations, write_fluctuations_csv
 from ..analysis.force_strain import RESIDUAL_PACK_WEIGHTS, cycle_figures, plot_force_strain, write_force_strain_csv
-from ..analysis.spring_back import PARTS, branch_strain_split
+from ..analysis.spring_back import PARTS, branch_strain_split, spring_back_shares
 from ..config import ConfigError, tables
 from ..config.build import MassScalingWarning, scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_walls
@@ -80,7 +80,7 @@ def _fluctuations(out_dir: Path, scene, lid: PlaneWall, start: float, meta: dict
 
 def lid_index(scene, lid: PlaneWall) -> int:
     """The lid's row in ContactResult.wall_reactions (mesh walls first, then the planes)."""
-    return len(scene.contact.meshes) + [p.name for p in scene.contact.planes].index(lid.name)
+    return scene.contact.wall_names.index(lid.name)
 
 
 def _state_keeper(out_dir: Path, grains, meta: dict, n_load: int, lid: int, release_force: float):
@@ -127,9 +127,10 @@ def spring_back(scene, out_dir: Path, end) -> dict:
 def warn_if_grains_spring_back(scene, back: dict) -> None:
     """A mass-scaled run whose grains gave back more than GRAINS_SPRING_BACK of the pack's spring-back
     themselves: their elasticity, scaled with the loads, is in its residual strain and hysteresis."""
-    if scene.mass_scaling == 1.0 or not back.get("branch_strain", 0.0) > 0.0:
+    shares = spring_back_shares(back)
+    if scene.mass_scaling == 1.0 or shares is None:
         return
-    share = back["deformation"] / back["branch_strain"]
+    share = shares["deformation"]
     if share > GRAINS_SPRING_BACK:
         warnings.warn(MassScalingWarning(
             f"solver.mass_scaling = {scene.mass_scaling:g}: the grains' own elasticity gave back {share:.0%} of what "
@@ -162,8 +163,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         for name in (TURN_STATE, RELEASE_STATE):
             (out_dir / name).unlink(missing_ok=True)
     weight = pack_weight(scene)
-    keep_states = _state_keeper(out_dir, initial.grains, meta, cfg["lid"]["frames"],
-                                lid_index(scene, lid), RESIDUAL_PACK_WEIGHTS * weight)  # fmt: skip
+    residual_force = RESIDUAL_PACK_WEIGHTS * weight
+    keep_states = _state_keeper(out_dir, initial.grains, meta, cfg["lid"]["frames"], lid_index(scene, lid),
+                                residual_force)  # fmt: skip
     result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
                       identity=identity, x0=initial.x, v0=initial.v,
                       friction0=initial.friction, resume=resume_here,
@@ -171,7 +173,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     phase, strain, force = lid_curve(out_dir / "walls.csv", lid, cfg["lid"]["start"], 0.5 * duration)
     write_force_strain_csv(out_dir / "force_strain.csv", phase, strain, force)
     try:
-        figures = cycle_figures(phase, strain, force, cfg["lid"]["start"], zero_force=RESIDUAL_PACK_WEIGHTS * weight)
+        figures = cycle_figures(phase, strain, force, cfg["lid"]["start"], zero_force=residual_force)
     except ValueError as exc:  # e.g. the lid never reached the pack: the curve is still written
         figures = {"cycle_error": str(exc)}
     back = spring_back(scene, out_dir, result.state)
@@ -181,7 +183,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     summary = run_summary("lid_compression", scene, result, t_start)
     summary.update(figures)
     summary["pack_weight"] = weight
-    summary["residual_force"] = RESIDUAL_PACK_WEIGHTS * weight
+    summary["residual_force"] = residual_force
     summary["spring_back"] = back
     summary["fluctuations"] = _fluctuations(out_dir, scene, lid, cfg["lid"]["start"], meta)
     summary["pack_top"] = top
