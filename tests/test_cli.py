@@ -121,6 +121,18 @@ def test_first_run_says_the_kernels_are_compiling(tmp_path, cli, monkeypatch):
     assert code == 0 and "compiling" not in err
 
 
+def test_a_bad_config_on_a_cold_cache_is_its_one_line(tmp_path, cli, monkeypatch):
+    """The compile notice comes after the checks: a mistake on a fresh install is answered in the
+    one line that names it, not after a promise of minutes of compilation."""
+    from vemdem import cli as cli_module
+
+    monkeypatch.setattr(cli_module, "_kernels_compiled", lambda: False)
+    code, _, err = cli("run", write(tmp_path, GOOD.replace("nu = 0.16", "nu = 0.7")), "--out", tmp_path / "out")
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "material.nu" in lines[0]
+    assert not (tmp_path / "out").exists()
+
+
 def test_long_frames_still_report_progress(tmp_path, monkeypatch):
     """Between frames (minutes apart in a jammed lid cycle) the loop reports the step it is on,
     at most every PROGRESS_EVERY_S of wall time; each frame still reports its own line."""

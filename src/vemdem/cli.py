@@ -152,8 +152,6 @@ def _kernels_compiled() -> bool:
 
 
 def cmd_run(args) -> int:
-    if not args.quiet and not _kernels_compiled():
-        print("vemdem: compiling the numerical kernels (once per install, one to two minutes) ...", file=sys.stderr)
     try:
         cfg, module = checked_config(load_toml(args.config))
         if args.resume and not getattr(module, "RESUMABLE", False):
@@ -162,6 +160,9 @@ def cmd_run(args) -> int:
     except ConfigError as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
+    # after the checks: a mistake is answered in its one line, not after a promise of minutes
+    if not args.quiet and not _kernels_compiled():
+        print("vemdem: compiling the numerical kernels (once per install, one to two minutes) ...", file=sys.stderr)
     try:
         kwargs = {"resume": True} if args.resume else {}
         summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
