@@ -1,7 +1,9 @@
 import sys
 from pathlib import Path
 
-import numpy as np
+import vemdem  # noqa: F401  first: it pins the BLAS kernels before NumPy loads them, as the command line does
+
+import numpy as np  # noqa: E402
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
