@@ -1,7 +1,7 @@
 import sys
 from pathlib import Path
 
-import vemdem  # noqa: F401  first: it pins the BLAS kernels before NumPy loads them, as the command line does
+import vemdem  # noqa: F401  first: it pins the kernels before NumPy and numba load, as the command line does
 
 import numpy as np  # noqa: E402
 import pytest

@@ -11,7 +11,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "vemdem"
 # room -> rooms it may import (a room always may import itself). A dotted entry allows one module.
 ALLOWED = {
     "geometry": set(),
-    "portable": set(),  # runs before NumPy loads: imports nothing of vemdem (nor NumPy)
+    "portable": set(),  # runs before NumPy and numba load: imports nothing of vemdem (nor them)
     "vem": {"geometry"},
     "contact": {"geometry"},
     "model": {"vem", "contact", "geometry"},

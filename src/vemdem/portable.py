@@ -1,19 +1,24 @@
-"""One set of BLAS kernels on every x86-64 machine, so that a config and a seed give the same
-run on any of them (docs/errors.md, "Reproducible across machines").
+"""One set of kernels on every x86-64 machine, so that a config and a seed give the same run on
+any of them (docs/errors.md, "Reproducible across machines").
 
-OpenBLAS, behind NumPy and SciPy, picks its kernels when it loads: AVX-512 ones on a recent Intel
-Xeon, AVX2 ones ("Haswell") on an AMD EPYC or an older Intel. They round differently in the last
-bit, and every run of grains is chaotic: the main job's 160 grains (the README) left 27.9 +- 7.7
-deg on an AVX-512 Xeon and 21.6 +- 3.2 deg on the EPYC where the docs' figures were measured;
-with the Haswell kernels the Xeon gives the EPYC's run to the bit (grains.csv byte for byte), as
-fast (docs/errors.md). Numba's own kernels are compiled without fast-math contractions and gave
-the same bits for the host CPU and a generic one, so BLAS is the part to pin.
+Two kinds of compiled code follow the CPU unless told otherwise, and both round differently in
+the last bit from one CPU to another; every run of grains is chaotic, so a last-bit difference
+ends in another heap of the same statistics:
+- OpenBLAS, behind NumPy and SciPy, picks its kernels when it loads: AVX-512 ones on a recent
+  Intel Xeon, AVX2 ones ("Haswell") on an AMD EPYC or an older Intel. The main job's 160 grains
+  (the README) left 27.9 +- 7.7 deg with an AVX-512 Xeon's own kernels and 21.6 +- 3.2 deg with
+  the Haswell ones, the run of the EPYC where the docs' figures were measured (its angle,
+  uncertainty and 17,177 steps);
+- numba compiles for the host CPU. Its kernels without fast-math gave the same bits for the
+  host and a generic CPU, but the linear solvers' fast-math kernels (summed rows, reassociated
+  to the vector width) did not: an implicit 40-grain pack parted at round-off.
 
-`pin_blas_kernels` runs when vemdem is imported, before NumPy loads OpenBLAS (the command line,
-and the sweep's Dask workers, which inherit the variable). It sets OPENBLAS_CORETYPE=Haswell only
-on x86-64 Linux machines whose CPU has AVX2 and FMA (the kernels need them) and only where the
-user set neither OPENBLAS_CORETYPE nor VEMDEM_NATIVE_BLAS=1 (the machine's own kernels).
-This module imports nothing that loads NumPy.
+`pin_kernels` runs when vemdem is imported, before NumPy loads OpenBLAS and numba reads its
+configuration (the command line, and a local sweep's Dask workers, which inherit the variables).
+On x86-64 Linux machines whose CPU has AVX2 and FMA it sets OPENBLAS_CORETYPE=Haswell and
+NUMBA_CPU_NAME=haswell with the features that name implies (NUMBA_CPU_FEATURES empty), each only
+where the user set neither that variable nor VEMDEM_NATIVE=1 (the machine's own kernels). Measured
+cost: none beyond the noise (docs/errors.md). This module imports nothing that loads NumPy.
 """
 
 from __future__ import annotations
@@ -22,7 +27,8 @@ import os
 import platform
 import sys
 
-PORTABLE_CORE = "Haswell"
+OPENBLAS_CORE = "Haswell"
+NUMBA_CPU = "haswell"
 
 
 def _cpu_flags() -> set[str]:
@@ -36,31 +42,66 @@ def _cpu_flags() -> set[str]:
     return set()
 
 
-def pin_blas_kernels() -> str:
-    """Set OPENBLAS_CORETYPE where that is safe and still in time; returns what was done."""
-    if os.environ.get("VEMDEM_NATIVE_BLAS") == "1":
-        return "native: VEMDEM_NATIVE_BLAS=1"
-    if "OPENBLAS_CORETYPE" in os.environ:
-        return f"set by the user: {os.environ['OPENBLAS_CORETYPE']}"
-    if platform.machine().lower() not in ("x86_64", "amd64") or not sys.platform.startswith("linux"):
-        return "native: not x86-64 Linux"
-    if not {"avx2", "fma"} <= _cpu_flags():
-        return "native: the CPU lacks AVX2 or FMA"
-    if "numpy" in sys.modules:
-        return "native: NumPy was imported before vemdem"
-    os.environ["OPENBLAS_CORETYPE"] = PORTABLE_CORE
-    return f"pinned: {PORTABLE_CORE}"
+def portable_machine() -> bool:
+    """x86-64 Linux with AVX2 and FMA: where the Haswell kernels run."""
+    x86 = platform.machine().lower() in ("x86_64", "amd64") and sys.platform.startswith("linux")
+    return x86 and {"avx2", "fma"} <= _cpu_flags()
 
 
-PINNED = pin_blas_kernels()
+_SENTINEL = "VEMDEM_PINNED"  # which of the variables vemdem itself set (children inherit it)
 
 
-def blas_kernels() -> dict:
-    """What the run's OpenBLAS libraries use ("architecture" per library, from threadpoolctl) and
-    why (PINNED): for summary.json, so that two runs that differ can be told apart by it."""
+def _mark(library: str) -> None:
+    marks = [m for m in os.environ.get(_SENTINEL, "").split(",") if m]
+    os.environ[_SENTINEL] = ",".join(sorted({*marks, library}))
+
+
+def pin_kernels() -> str:
+    """Set the variables where that is safe and still in time; returns what was done, per library."""
+    if os.environ.get("VEMDEM_NATIVE") == "1":
+        return "native: VEMDEM_NATIVE=1"
+    if not portable_machine():
+        return "native: not x86-64 Linux with AVX2 and FMA"
+    done = []
+    # a process that inherited our own pin (a local sweep's Dask workers) says so, not "the user"
+    inherited = os.environ.get(_SENTINEL, "").split(",")
+    if "openblas" in inherited and os.environ.get("OPENBLAS_CORETYPE") == OPENBLAS_CORE:
+        done.append(f"openblas pinned ({OPENBLAS_CORE})")
+    elif "OPENBLAS_CORETYPE" in os.environ:
+        done.append(f"openblas set by the user ({os.environ['OPENBLAS_CORETYPE']})")
+    elif "numpy" in sys.modules or "scipy" in sys.modules:
+        done.append("openblas native (NumPy was imported before vemdem)")
+    else:
+        os.environ["OPENBLAS_CORETYPE"] = OPENBLAS_CORE
+        _mark("openblas")
+        done.append(f"openblas pinned ({OPENBLAS_CORE})")
+    if "numba" in inherited and os.environ.get("NUMBA_CPU_NAME") == NUMBA_CPU:
+        done.append(f"numba pinned ({NUMBA_CPU})")
+    elif "NUMBA_CPU_NAME" in os.environ or "NUMBA_CPU_FEATURES" in os.environ:
+        done.append(f"numba set by the user ({os.environ.get('NUMBA_CPU_NAME', 'host')})")
+    elif "numba" in sys.modules:
+        done.append("numba native (numba was imported before vemdem)")
+    else:
+        os.environ["NUMBA_CPU_NAME"] = NUMBA_CPU
+        os.environ["NUMBA_CPU_FEATURES"] = ""  # the named CPU's own features, not the host's
+        _mark("numba")
+        done.append(f"numba pinned ({NUMBA_CPU})")
+    return ", ".join(done)
+
+
+PINNED = pin_kernels()
+
+
+def kernels() -> dict:
+    """What the run rounds with: OpenBLAS's kernels (threadpoolctl's "architecture" for NumPy's and
+    SciPy's libraries), numba's target CPU, and why (PINNED). For summary.json, so that two runs
+    that differ can be told apart by it."""
+    import llvmlite.binding  # noqa: PLC0415
+    import numba  # noqa: PLC0415 (loaded by any run before this is asked)
     import numpy  # noqa: F401, PLC0415 (the libraries must be loaded to be listed)
     import scipy.linalg  # noqa: F401, PLC0415 (SciPy's own OpenBLAS, which numba's kernels call too)
     from threadpoolctl import threadpool_info  # noqa: PLC0415
 
     cores = sorted({str(lib.get("architecture")) for lib in threadpool_info() if lib.get("internal_api") == "openblas"})
-    return {"architecture": ",".join(cores) or None, "choice": PINNED}
+    target = numba.config.CPU_NAME or f"host ({llvmlite.binding.get_host_cpu_name()})"
+    return {"openblas": ",".join(cores) or None, "numba_cpu": target, "choice": PINNED}

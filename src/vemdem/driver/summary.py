@@ -8,7 +8,7 @@ import time
 import warnings
 
 from ..model.scene import Scene
-from ..portable import blas_kernels
+from ..portable import kernels
 from .loop import Run
 
 
@@ -121,8 +121,9 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,
-        # the BLAS kernels the run rounded with: runs on two machines agree to the bit where these do
-        "blas_kernels": blas_kernels(),
+        # the kernels the run rounded with (OpenBLAS's, numba's target): runs on two machines agree to
+        # the bit where these do (docs/errors.md)
+        "kernels": kernels(),
         "energy": _books(run),
         "contact": {
             "activation_gap": scene.contact.law.activation_gap,
