@@ -12,7 +12,7 @@ from vemdem.portable import NUMBA_CPU, OPENBLAS_CORE, portable_machine
 
 PROBE = "import vemdem, numpy, json; print(json.dumps(vemdem.portable.kernels()))"
 OURS = ("OPENBLAS_CORETYPE", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "VEMDEM_NATIVE", "VEMDEM_PINNED")
-pinnable = pytest.mark.skipif(not portable_machine(), reason="the portable kernels need x86-64 Linux with AVX2 and FMA")
+pinnable = pytest.mark.skipif(not portable_machine(), reason="the pin needs x86-64 Linux with the Haswell features")
 
 
 def _probe(code=PROBE, **env):

@@ -15,9 +15,10 @@ ends in another heap of the same statistics:
 
 `pin_kernels` runs when vemdem is imported, before NumPy loads OpenBLAS and numba reads its
 configuration (the command line, and a local sweep's Dask workers, which inherit the variables).
-On x86-64 Linux machines whose CPU has AVX2 and FMA it sets OPENBLAS_CORETYPE=Haswell and
-NUMBA_CPU_NAME=haswell with the features that name implies (NUMBA_CPU_FEATURES empty), each only
-where the user set neither that variable nor VEMDEM_NATIVE=1 (the machine's own kernels). Measured
+On x86-64 Linux machines whose CPU has AVX2, FMA and the rest of Haswell's features
+(HASWELL_FLAGS) it sets OPENBLAS_CORETYPE=Haswell and NUMBA_CPU_NAME=haswell with the features
+that name implies (NUMBA_CPU_FEATURES empty), each only where the user set neither that variable
+nor VEMDEM_NATIVE=1 (the machine's own kernels). Measured
 cost: none beyond the noise (docs/errors.md). This module imports nothing that loads NumPy.
 """
 
@@ -42,10 +43,16 @@ def _cpu_flags() -> set[str]:
     return set()
 
 
+# what code for the "haswell" target may use (LLVM's x86-64-v3 and Haswell's extras; Linux's flag
+# names): a virtual machine that hides one of them gets the native kernels, never an illegal instruction
+HASWELL_FLAGS = frozenset({"avx", "avx2", "fma", "f16c", "bmi1", "bmi2", "abm", "movbe", "popcnt", "sse4_1", "sse4_2",
+                           "ssse3", "cx16", "lahf_lm", "pclmulqdq"})  # fmt: skip
+
+
 def portable_machine() -> bool:
-    """x86-64 Linux with AVX2 and FMA: where the Haswell kernels run."""
+    """x86-64 Linux whose CPU has every feature of the Haswell kernels."""
     x86 = platform.machine().lower() in ("x86_64", "amd64") and sys.platform.startswith("linux")
-    return x86 and {"avx2", "fma"} <= _cpu_flags()
+    return x86 and HASWELL_FLAGS <= _cpu_flags()
 
 
 _SENTINEL = "VEMDEM_PINNED"  # which of the variables vemdem itself set (children inherit it)
@@ -61,7 +68,7 @@ def pin_kernels() -> str:
     if os.environ.get("VEMDEM_NATIVE") == "1":
         return "native: VEMDEM_NATIVE=1"
     if not portable_machine():
-        return "native: not x86-64 Linux with AVX2 and FMA"
+        return "native: not x86-64 Linux with the Haswell features (AVX2, FMA, ...)"
     done = []
     # a process that inherited our own pin (a local sweep's Dask workers) says so, not "the user"
     inherited = os.environ.get(_SENTINEL, "").split(",")
