@@ -18,8 +18,8 @@ configuration (the command line, and a local sweep's Dask workers, which inherit
 On x86-64 Linux machines whose CPU has AVX2, FMA and the rest of Haswell's features
 (HASWELL_FLAGS) it sets OPENBLAS_CORETYPE=Haswell and NUMBA_CPU_NAME=haswell with the features
 that name implies (NUMBA_CPU_FEATURES empty), each only where the user set neither that variable
-nor VEMDEM_NATIVE=1 (the machine's own kernels). Measured
-cost: none beyond the noise (docs/errors.md). This module imports nothing that loads NumPy.
+nor VEMDEM_NATIVE=1 (the machine's own kernels). Measured cost: none beyond the noise
+(docs/errors.md). This module imports nothing that loads NumPy.
 """
 
 from __future__ import annotations
@@ -63,37 +63,34 @@ def _mark(library: str) -> None:
     os.environ[_SENTINEL] = ",".join(sorted({*marks, library}))
 
 
+def _pin_one(library: str, settings: dict, label: str, user_vars: tuple, loaded: dict, inherited: list) -> str:
+    """Pin one library's variables (`settings`) unless the user set one of `user_vars` or a module of
+    `loaded` (module name -> the name said) was imported already; returns what was done."""
+    if library in inherited and all(os.environ.get(k) == v for k, v in settings.items()):
+        return f"{library} pinned ({label})"  # a child of a pinned process (a local sweep's Dask workers)
+    if any(v in os.environ for v in user_vars):
+        return f"{library} set by the user ({os.environ.get(user_vars[0], 'host')})"
+    early = [shown for module, shown in loaded.items() if module in sys.modules]
+    if early:
+        return f"{library} native ({early[0]} was imported before vemdem)"
+    os.environ.update(settings)
+    _mark(library)
+    return f"{library} pinned ({label})"
+
+
 def pin_kernels() -> str:
     """Set the variables where that is safe and still in time; returns what was done, per library."""
     if os.environ.get("VEMDEM_NATIVE") == "1":
         return "native: VEMDEM_NATIVE=1"
     if not portable_machine():
         return "native: not x86-64 Linux with the Haswell features (AVX2, FMA, ...)"
-    done = []
-    # a process that inherited our own pin (a local sweep's Dask workers) says so, not "the user"
     inherited = os.environ.get(_SENTINEL, "").split(",")
-    if "openblas" in inherited and os.environ.get("OPENBLAS_CORETYPE") == OPENBLAS_CORE:
-        done.append(f"openblas pinned ({OPENBLAS_CORE})")
-    elif "OPENBLAS_CORETYPE" in os.environ:
-        done.append(f"openblas set by the user ({os.environ['OPENBLAS_CORETYPE']})")
-    elif "numpy" in sys.modules or "scipy" in sys.modules:
-        done.append("openblas native (NumPy was imported before vemdem)")
-    else:
-        os.environ["OPENBLAS_CORETYPE"] = OPENBLAS_CORE
-        _mark("openblas")
-        done.append(f"openblas pinned ({OPENBLAS_CORE})")
-    if "numba" in inherited and os.environ.get("NUMBA_CPU_NAME") == NUMBA_CPU:
-        done.append(f"numba pinned ({NUMBA_CPU})")
-    elif "NUMBA_CPU_NAME" in os.environ or "NUMBA_CPU_FEATURES" in os.environ:
-        done.append(f"numba set by the user ({os.environ.get('NUMBA_CPU_NAME', 'host')})")
-    elif "numba" in sys.modules:
-        done.append("numba native (numba was imported before vemdem)")
-    else:
-        os.environ["NUMBA_CPU_NAME"] = NUMBA_CPU
-        os.environ["NUMBA_CPU_FEATURES"] = ""  # the named CPU's own features, not the host's
-        _mark("numba")
-        done.append(f"numba pinned ({NUMBA_CPU})")
-    return ", ".join(done)
+    openblas = _pin_one("openblas", {"OPENBLAS_CORETYPE": OPENBLAS_CORE}, OPENBLAS_CORE, ("OPENBLAS_CORETYPE",),
+                        {"numpy": "NumPy", "scipy": "NumPy"}, inherited)  # fmt: skip
+    # NUMBA_CPU_FEATURES empty: the named CPU's own features, not the host's
+    numba = _pin_one("numba", {"NUMBA_CPU_NAME": NUMBA_CPU, "NUMBA_CPU_FEATURES": ""}, NUMBA_CPU,
+                     ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES"), {"numba": "numba"}, inherited)  # fmt: skip
+    return f"{openblas}, {numba}"
 
 
 PINNED = pin_kernels()
