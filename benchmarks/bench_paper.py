@@ -6,6 +6,7 @@
     python benchmarks/bench_paper.py --implicit --no-vtk --out real/     # the real-density runs (issue 14)
     python benchmarks/bench_paper.py --implicit --only mid --pack-state rpack/state.npz
     python benchmarks/bench_paper.py --implicit --only compression-pack --lid-turn 0.22 --pack-state rpack/state.npz
+    python benchmarks/bench_paper.py --implicit --only compression-pack --set solver.max_iterations=30 ...
 
 Each run is the `paper-*` example run through the library as `vemdem run` would, in OUT/<name>;
 `compression-pack` is `paper-compression` started from the pack (the paper's own setup: the lid
@@ -15,7 +16,9 @@ settled at the real density: `paper-pack` with `[model] grains = "rigid"` and `m
 `--implicit` runs the `paper-*-implicit` examples instead: the paper's own method, implicit Newmark
 at the real density, with no mass scaling. `--no-vtk` leaves the frames out (the docs' wall times).
 `--lid-turn E` turns the lids at compressive strain E of their start height instead of the paper's
-4.9 mm (docs/results.md, "Cycles turned before the jam").
+4.9 mm (docs/results.md, "Cycles turned before the jam"). `--set KEY=VALUE` changes one config value of
+every run (the step control's budget of docs/results.md: `--set solver.max_iterations=30
+--set solver.easy_iterations=16`).
 A run whose summary.json already exists is read, not rerun (so an interrupted sweep goes on
 where it stopped; an interrupted run itself resumes from its checkpoint). Prints one row per run:
 grains, simulated time, accepted steps, wall seconds, steps/s, grain-steps/s and the run's
@@ -34,7 +37,9 @@ import tomllib
 from pathlib import Path
 
 from vemdem.analysis.spring_back import spring_back_shares
+from vemdem.config import ConfigError
 from vemdem.scenarios.registry import checked_config, example_text
+from vemdem.sweep import parse_set, with_values
 
 RUNS = {
     "pack": "paper-pack",
@@ -51,7 +56,7 @@ HEADLINES = ("pack_height", "packing_fraction", "angle_of_repose_deg", "angle_of
              "residual_strain_absolute")  # fmt: skip
 
 def config_for(name: str, out: Path, grains: int | None, implicit: bool = False, pack_state: Path | None = None,
-               vtk: bool = True, lid_turn: float | None = None) -> tuple:  # fmt: skip
+               vtk: bool = True, lid_turn: float | None = None, overrides: dict | None = None) -> tuple:  # fmt: skip
     """The checked config of one run and its scenario module (registry.checked_config)."""
     raw = tomllib.loads(example_text(RUNS[name] + ("-implicit" if implicit else "")))
     if name in ("high", "mid", "low", "compression-pack"):
@@ -68,7 +73,7 @@ def config_for(name: str, out: Path, grains: int | None, implicit: bool = False,
             raw["lid"]["start"], raw["lid"]["end"] = 3.5e-3, 2.4e-3  # a few grains stand lower
     if lid_turn is not None and "lid" in raw:
         raw["lid"]["end"] = round(raw["lid"]["start"] * (1.0 - lid_turn), 9)  # to the nm: 5.6 mm as one types it
-    return checked_config(raw)
+    return checked_config(with_values(raw, overrides or {}))
 
 
 def run_one(name: str, out: Path, grains: int | None, **options) -> dict:
@@ -105,6 +110,8 @@ def main(argv=None) -> None:
     p.add_argument("--no-vtk", action="store_true", help="write no VTK frames (the wall times of docs/results.md)")
     p.add_argument("--lid-turn", type=float, metavar="E",
                    help="turn the lids at compressive strain E (0 < E < 1) of their start height [the paper's 4.9 mm]")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="one config value for every run, as `vemdem sweep --set` spells it (solver.max_iterations=30)")
     args = p.parse_args(argv)
     if args.lid_turn is not None and not 0.0 < args.lid_turn < 1.0:
         p.error(f"--lid-turn: a strain between 0 and 1, got {args.lid_turn}")
@@ -123,9 +130,23 @@ def main(argv=None) -> None:
           f"{'-implicit' if args.implicit else ''} examples)")  # fmt: skip
     print(f"| run | grains | simulated s | steps | wall s | steps/s | grain-steps/s | wall / {target / 3600:.0f} h | figures |")
     print("|---|---|---|---|---|---|---|---|---|")
-    options = dict(implicit=args.implicit, pack_state=args.pack_state, vtk=not args.no_vtk, lid_turn=args.lid_turn)
+    overrides = {}
+    for text in args.set:
+        try:
+            key, values = parse_set(text)
+        except ConfigError as exc:
+            p.error(str(exc))
+        if len(values) != 1:
+            p.error(f"--set {key}: one value per key (a sweep of values is `vemdem sweep`)")
+        overrides[key] = values[0]
+    options = dict(implicit=args.implicit, pack_state=args.pack_state, vtk=not args.no_vtk, lid_turn=args.lid_turn,
+                   overrides=overrides)  # fmt: skip
     for name in names:
-        print(row(name, run_one(name, args.out, args.grains, **options), target), flush=True)
+        try:
+            summary = run_one(name, args.out, args.grains, **options)
+        except ConfigError as exc:  # a --set value the config check refuses
+            p.error(f"{name}: {exc}")
+        print(row(name, summary, target), flush=True)
 
 
 if __name__ == "__main__":

@@ -76,3 +76,25 @@ def test_a_lid_row_gives_its_spring_back_shares(bench):
     assert "residual_strain_absolute 0.2285" in line and "spring-back 0.04 (grains 30%, gaps 30%)" in line
     s["spring_back"] = {"error": "no turn_state.npz"}
     assert "spring-back" not in bench.row("compression-pack", s, 3600.0)
+
+
+def test_set_changes_one_value_of_every_run_and_nothing_else(bench, tmp_path):
+    overrides = {"solver.max_iterations": 30, "solver.easy_iterations": 16}
+    for name in ("pack", "compression-pack"):
+        plain, _ = bench.config_for(name, tmp_path, None, implicit=True)
+        changed, _ = bench.config_for(name, tmp_path, None, implicit=True, overrides=overrides)
+        assert (changed["solver"]["max_iterations"], changed["solver"]["easy_iterations"]) == (30, 16), name
+        assert (plain["solver"]["max_iterations"], plain["solver"]["easy_iterations"]) != (30, 16), name
+        changed["solver"]["max_iterations"] = plain["solver"]["max_iterations"]
+        changed["solver"]["easy_iterations"] = plain["solver"]["easy_iterations"]
+        assert changed == plain, name
+
+
+@pytest.mark.parametrize("text, message", [("solver.max_iterations=30,40", "one value per key"),
+                                           ("solver.max_iterations", "expected KEY=V1,V2"),
+                                           ("solver.max_iterations=-3", "solver.max_iterations")])  # fmt: skip
+def test_a_bad_set_is_refused_in_one_line(bench, tmp_path, capsys, text, message):
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(["--implicit", "--only", "pack", "--set", text, "--out", str(tmp_path)])
+    assert exit_.value.code == 2
+    assert message in capsys.readouterr().err
