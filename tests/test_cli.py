@@ -133,6 +133,34 @@ def test_a_bad_config_on_a_cold_cache_is_its_one_line(tmp_path, cli, monkeypatch
     assert not (tmp_path / "out").exists()
 
 
+def test_the_compile_notice_reads_numbas_index_for_this_target(tmp_path, cli, monkeypatch):
+    """An index that holds the kernels only for another CPU target (an install compiled natively,
+    before vemdem.portable pinned the target) is a compile ahead; one for this target is not, and a
+    cache whose layout surprises the check counts as compiled (no false notice)."""
+    from numba.core.registry import cpu_target
+
+    from vemdem import cli as cli_module
+    from vemdem.vem import element
+
+    code, _, _ = cli("run", write(tmp_path, GOOD), "--out", tmp_path / "warm", "--quiet")  # the kernels cached
+    assert code == 0 and cli_module._kernels_compiled()
+    here = cpu_target.target_context.codegen().magic_tuple()
+    elsewhere = (here[0], "some-other-cpu", "+avx512f")
+    cache_file = element._evaluate_grains._cache._cache_file
+    monkeypatch.setattr(cache_file, "_load_index", lambda: {(("sig",), elsewhere): "x.nbc"})
+    assert not cli_module._kernels_compiled()
+    monkeypatch.setattr(cache_file, "_load_index", lambda: {(("sig",), elsewhere): "x.nbc", (("sig",), here): "y"})
+    assert cli_module._kernels_compiled()
+    monkeypatch.setattr(cache_file, "_load_index", lambda: {})  # numba's answer to a stale or foreign index
+    assert not cli_module._kernels_compiled()
+
+    def unreadable():
+        raise ValueError("a layout of a later numba")
+
+    monkeypatch.setattr(cache_file, "_load_index", unreadable)
+    assert cli_module._kernels_compiled()
+
+
 def test_long_frames_still_report_progress(tmp_path, monkeypatch):
     """Between frames (minutes apart in a jammed lid cycle) the loop reports the step it is on,
     at most every PROGRESS_EVERY_S of wall time; each frame still reports its own line."""

@@ -140,15 +140,21 @@ def _remove_if_empty(out: Path, created: bool) -> None:
 
 
 def _kernels_compiled() -> bool:
-    """Whether numba has cached the element kernels (beside the sources, or in NUMBA_CACHE_DIR)."""
-    from pathlib import Path as _Path
+    """Whether numba's cache holds the element kernels for this machine's target and these sources,
+    as numba itself reads its index (beside the sources, or in NUMBA_CACHE_DIR). An index for
+    another CPU target (an install compiled natively before vemdem.portable pinned the target) or
+    for older sources means a compile ahead. A cache this reading does not understand counts as
+    compiled: the notice is a courtesy, and a false one would be worse than a missing one."""
+    from numba.core.registry import cpu_target
 
-    import numba
+    from .vem import element
 
-    places = [_Path(__file__).parent / "vem" / "__pycache__"]
-    if numba.config.CACHE_DIR:
-        places.append(_Path(numba.config.CACHE_DIR))
-    return any(any(p.rglob("element._evaluate_grains-*.nbi")) for p in places if p.is_dir())
+    try:
+        overloads = element._evaluate_grains._cache._cache_file._load_index()  # numba's own freshness checks
+        target = cpu_target.target_context.codegen().magic_tuple()
+        return any(key[1] == target for key in overloads)
+    except Exception:  # noqa: BLE001 - numba's private layout: any surprise means "do not warn"
+        return True
 
 
 def cmd_run(args) -> int:
