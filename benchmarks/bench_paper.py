@@ -39,7 +39,7 @@ from pathlib import Path
 from vemdem.analysis.spring_back import spring_back_shares
 from vemdem.config import ConfigError
 from vemdem.scenarios.registry import checked_config, example_text
-from vemdem.sweep import parse_set, with_values
+from vemdem.sweep import parse_sets, with_values
 
 RUNS = {
     "pack": "paper-pack",
@@ -115,6 +115,14 @@ def main(argv=None) -> None:
     args = p.parse_args(argv)
     if args.lid_turn is not None and not 0.0 < args.lid_turn < 1.0:
         p.error(f"--lid-turn: a strain between 0 and 1, got {args.lid_turn}")
+    try:
+        sets = parse_sets(args.set)
+    except ConfigError as exc:
+        p.error(str(exc))
+    for key, values in sets.items():
+        if len(values) != 1:
+            p.error(f"--set {key}: one value per key (a sweep of values is `vemdem sweep`)")
+    overrides = {key: values[0] for key, values in sets.items()}
     names = [n.strip() for n in args.only.split(",") if n.strip()]
     unknown = set(names) - set(RUNS)
     if unknown:
@@ -130,15 +138,6 @@ def main(argv=None) -> None:
           f"{'-implicit' if args.implicit else ''} examples)")  # fmt: skip
     print(f"| run | grains | simulated s | steps | wall s | steps/s | grain-steps/s | wall / {target / 3600:.0f} h | figures |")
     print("|---|---|---|---|---|---|---|---|---|")
-    overrides = {}
-    for text in args.set:
-        try:
-            key, values = parse_set(text)
-        except ConfigError as exc:
-            p.error(str(exc))
-        if len(values) != 1:
-            p.error(f"--set {key}: one value per key (a sweep of values is `vemdem sweep`)")
-        overrides[key] = values[0]
     options = dict(implicit=args.implicit, pack_state=args.pack_state, vtk=not args.no_vtk, lid_turn=args.lid_turn,
                    overrides=overrides)  # fmt: skip
     for name in names:

@@ -98,3 +98,11 @@ def test_a_bad_set_is_refused_in_one_line(bench, tmp_path, capsys, text, message
         bench.main(["--implicit", "--only", "pack", "--set", text, "--out", str(tmp_path)])
     assert exit_.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_key_set_twice_is_refused_as_the_sweep_refuses_it(bench, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(["--only", "pack", "--set", "solver.max_iterations=30", "--set", "solver.max_iterations=40",
+                    "--out", str(tmp_path)])  # fmt: skip
+    assert exit_.value.code == 2
+    assert "--set solver.max_iterations: given twice" in capsys.readouterr().err
