@@ -221,6 +221,30 @@ def test_checkpoint_with_a_damaged_carried_entry_is_one_line(tmp_path, cli, carr
     assert_one_line_error(code, err, "checkpoint.npz")
 
 
+@pytest.mark.parametrize("changes", ["{not json", '{"key": "solver.dt"}', "[1, 2]"],
+                         ids=["not JSON", "an object", "numbers"])  # fmt: skip
+def test_checkpoint_with_damaged_resume_changes_is_one_line(tmp_path, cli, changes):
+    path = good_drop(tmp_path)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--quiet")[0] == 0
+    with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
+        entries = {k: d[k] for k in d.files}
+    entries["resume_changes"] = np.array(changes)
+    np.savez(out / "checkpoint.npz", **entries)
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert_one_line_error(code, err, "checkpoint.npz")
+
+
+def test_a_step_control_change_on_resume_is_one_warning_line(tmp_path, cli):
+    out = tmp_path / "out"
+    assert cli("run", good_drop(tmp_path), "--out", out, "--quiet")[0] == 0
+    code, _, err = cli("run", good_drop(tmp_path, **{"solver.max_iterations": 30}), "--out", out, "--quiet", "--resume")
+    assert code == 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vemdem: warning: --resume: ")
+    assert "solver.max_iterations 15 -> 30" in lines[0] and "resume_changes" in lines[0]
+
+
 def test_non_utf8_config(tmp_path, cli):
     path = tmp_path / "job.toml"
     path.write_bytes(b"scenario = \"scene\"\nname = \"\xff\xfe\"\n")

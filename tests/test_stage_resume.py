@@ -6,7 +6,9 @@ import json
 
 import pytest
 
+from vemdem.config import ConfigError
 from vemdem.driver import loop as loop_mod
+from vemdem.driver.checkpoint import ResumeChangeWarning
 from vemdem.scenarios.registry import checked_config
 
 BOX = 3.2e-3
@@ -67,3 +69,31 @@ def test_a_run_killed_in_either_stage_resumes_to_the_same_bits(tmp_path, monkeyp
         _checkpoints(monkeypatch)
         _run(raw, tmp_path / name, resume=True)
         _same_results(tmp_path / "whole", tmp_path / name)
+
+
+def test_a_resume_that_changed_the_step_control_keeps_the_settled_pack(tmp_path, monkeypatch):
+    """A run cut in its main stage and resumed with another Newton budget (driver.checkpoint.step_changes):
+    the settled pack is kept as it was (its files and summary untouched, it never ran with the new keys)
+    and the main stage records the change; a changed material is still refused, by the pack stage."""
+    raw = CONFIGS["pile_collapse"]
+    original = loop_mod.save_checkpoint
+    main_stage = []
+
+    def cut_in_main(path, *args, **kwargs):
+        original(path, *args, **kwargs)
+        main_stage.extend([path] if path.parent.name != "pack" else [])
+        if len(main_stage) == 2:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop_mod, "save_checkpoint", cut_in_main)
+    with pytest.raises(KeyboardInterrupt):
+        _run(raw, tmp_path)
+    monkeypatch.setattr(loop_mod, "save_checkpoint", original)
+    pack_files = {p.name: p.read_bytes() for p in (tmp_path / "pack").iterdir()}
+    with pytest.raises(ConfigError, match="settled from a different"):
+        _run({**raw, "material": {"E": 1.5e8}}, tmp_path, resume=True)
+    with pytest.warns(ResumeChangeWarning, match=r"solver\.max_iterations 15 -> 30"):
+        summary = _run({**raw, "solver": {"max_iterations": 30}}, tmp_path, resume=True)
+    assert [c["key"] for c in summary["resume_changes"]] == ["solver.max_iterations"]
+    assert {p.name: p.read_bytes() for p in (tmp_path / "pack").iterdir()} == pack_files
+    assert json.loads(pack_files["summary.json"])["resume_changes"] == []

@@ -49,7 +49,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     mode = run.add_mutually_exclusive_group()
-    mode.add_argument("--resume", action="store_true", help="continue an interrupted run from DIR/checkpoint.npz")
+    mode.add_argument("--resume", action="store_true",
+                      help="continue an interrupted run from DIR/checkpoint.npz (the config may change only "
+                           "solver.dt, dt_min, dt_max, max_iterations, easy_iterations, grow_after)")  # fmt: skip
     mode.add_argument("--overwrite", action="store_true", help="replace the results of an earlier run in DIR")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +19,10 @@ class CheckpointError(ValueError):
     """A checkpoint is missing, unreadable or belongs to another config; str(e) names the file."""
 
 
+class ResumeChangeWarning(UserWarning):
+    """A run resumed with changed step-control keys: from there on it is not the uninterrupted run."""
+
+
 @dataclass(frozen=True)
 class RunIdentity:
     """What makes a run this run, for --resume: the config keys it does not take from their
@@ -28,6 +33,9 @@ class RunIdentity:
     fingerprint: str
     choices: dict = field(default_factory=dict)
     legacy: str = ""
+    # the keys a resume may change ('solver.dt_max' -> the schema's default): how the run steps, not
+    # what it models, so that a stalled run can be given another Newton budget without a restart
+    adjustable: dict = field(default_factory=dict)
 
     def accepts(self, stored: str | None) -> bool:
         """Whether a fingerprint stored by a checkpoint or a stage's summary is this run's."""
@@ -50,8 +58,10 @@ class WallWork:
 
 
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
-                    identity: RunIdentity, walls: WallWork | None = None, carried: dict | None = None):  # fmt: skip
-    """`carried`: the integrator's own (Integrator.carried), e.g. the linear solver's hold."""
+                    identity: RunIdentity, walls: WallWork | None = None, carried: dict | None = None,
+                    changes: list | None = None):  # fmt: skip
+    """`carried`: the integrator's own (Integrator.carried), e.g. the linear solver's hold; `changes`: the
+    step-control keys earlier resumes changed (Resumed.changes)."""
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
     books = {} if walls is None else {"wall_work": walls.work, "wall_force": walls.force, "wall_t": walls.t}
@@ -64,7 +74,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              frozen_pair_steps=stats.frozen_pair_steps, stick_break_steps=stats.stick_break_steps,
              damping_hold_steps=stats.damping_hold_steps, tangent_blocks=stats.tangent_blocks,
              exact_tangent_blocks=stats.exact_tangent_blocks,
-             carried=json.dumps(carried or {}, sort_keys=True), **books,
+             carried=json.dumps(carried or {}, sort_keys=True), resume_changes=json.dumps(changes or []), **books,
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -73,38 +83,92 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
 class Resumed:
     """What a checkpoint gives back: the state and the run's books at its frame. `walls` is None for
     a checkpoint written before session 21 (the walls' work book then starts again at the resume);
-    `carried` is {} for one written before session 32 (the linear solver then starts afresh)."""
+    `carried` is {} for one written before session 32 (the linear solver then starts afresh).
+    `changes`: the step-control keys this and earlier resumes changed, each {key, then, now, time,
+    frame} (summary.json "resume_changes"); [] for a run resumed as it was started."""
 
     state: State
     stats: RunStats
     frame: int
     walls: WallWork | None
     carried: dict
+    changes: list = field(default_factory=list)
 
 
 def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> Resumed:
     """The run at a checkpoint, read in one pass; control.dt and easy_streak are restored in place.
-    Anything unreadable, from another config or of the wrong shape is a CheckpointError naming the file."""
+    Anything unreadable, from another config or of the wrong shape is a CheckpointError naming the file.
+    A config that differs only in identity.adjustable keys is accepted, with a ResumeChangeWarning."""
     if not path.is_file():
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
         with np.load(path, allow_pickle=False) as d:
-            if not identity.accepts(str(d["fingerprint"])):
-                then = json.loads(str(d["choices"])) if "choices" in d.files else None
-                raise CheckpointError(f"--resume: {path} was written by a different config{_changes(then, identity)}")
+            then = json.loads(str(d["choices"])) if "choices" in d.files else None
+            changes = [] if identity.accepts(str(d["fingerprint"])) else _step_changes(path, then, identity)
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
             bodies = {k.removeprefix("body_"): d[k] for k in d.files if k.startswith("body_")}
             state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]),
                           bodies)  # fmt: skip
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
-            resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d))
+            resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d))
     except CheckpointError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
+    if changes:
+        # a lowered dt_max or a raised dt_min holds from the first step on
+        control.dt = min(max(control.dt, control.dt_min), control.dt_max)
+        resumed.changes += [{**c, "time": state.t, "frame": resumed.frame} for c in changes]
+        said = "; ".join(f"{c['key']} {c['then']} -> {c['now']}" for c in changes)
+        warnings.warn(ResumeChangeWarning(
+            f"--resume: {path.parent} goes on from t = {state.t:.6g} s with {said} (step control only; from here on "
+            "the run is not the uninterrupted run's, to the bit; summary.json \"resume_changes\")"), stacklevel=2)
     return resumed
+
+
+def step_changes(path: Path, identity: RunIdentity) -> list[dict]:
+    """What load_checkpoint would accept of `identity` against the checkpoint at `path`, without
+    loading the run: [] for the same config, the changed step-control keys ({key, then, now}), or a
+    CheckpointError naming the other keys that changed (a finished stage asks this of its own)."""
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            if identity.accepts(str(d["fingerprint"])):
+                return []
+            then = json.loads(str(d["choices"])) if "choices" in d.files else None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__})") from None
+    return _step_changes(path, then, identity)
+
+
+def _step_changes(path: Path, then: dict | None, identity: RunIdentity) -> list[dict]:
+    """The step-control keys a resumed config changed, each {key, then, now}; a CheckpointError naming the
+    first keys that differ when any other key changed (or the checkpoint keeps no choices to compare)."""
+    refused = f"--resume: {path} was written by a different config"
+    if then is None:
+        raise CheckpointError(refused)
+    old, new = _flat(then), _flat(identity.choices)
+    keys = sorted(k for k in old.keys() | new.keys() if old.get(k, "default") != new.get(k, "default"))
+    fixed = [k for k in keys if k not in identity.adjustable]
+    if fixed or not keys:
+        allowed = f"; --resume may change only {', '.join(identity.adjustable)}" if identity.adjustable else ""
+        raise CheckpointError(refused + _changes(old, new, fixed) + allowed)
+
+    def value(tree, k):
+        return tree.get(k, identity.adjustable[k])
+
+    return [{"key": k, "then": value(old, k), "now": value(new, k)} for k in keys]
+
+
+def _earlier_changes(d) -> list:
+    """The step-control changes of earlier resumes (checkpoints before session 63 have none)."""
+    if "resume_changes" not in d.files:
+        return []
+    changes = json.loads(str(d["resume_changes"]))
+    if not isinstance(changes, list) or not all(isinstance(c, dict) for c in changes):
+        raise ValueError("resume_changes: not a list of objects")
+    return changes
 
 
 def _run_stats(d) -> RunStats:
@@ -152,12 +216,8 @@ def _integer(value) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _changes(then: dict | None, identity: RunIdentity, shown: int = 3) -> str:
-    """' (key: value then, value now; ...)' for the first keys that differ, '' when unknown."""
-    if then is None:
-        return ""
-    old, new = _flat(then), _flat(identity.choices)
-    keys = sorted(k for k in old.keys() | new.keys() if old.get(k, "default") != new.get(k, "default"))
+def _changes(old: dict, new: dict, keys: list, shown: int = 3) -> str:
+    """' (key: value then, value now; ...)' for the first of `keys` (flat, differing), '' for none."""
     if not keys:
         return ""
     items = [f"{k}: {old.get(k, 'default')} then, {new.get(k, 'default')} now" for k in keys[:shown]]

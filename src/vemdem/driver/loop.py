@@ -13,7 +13,7 @@ stress-controlled tests drive their walls. Scenarios are short recipes over this
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +50,7 @@ class Run:
     integrator: Integrator
     wall_seconds: float = 0.0
     out_dir: Path | None = None  # where its frames are (summary: the energy balance from history.csv)
+    resume_changes: list = field(default_factory=list)  # step-control keys resumes changed (checkpoint.Resumed)
 
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
@@ -73,18 +74,19 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         walls = resumed.walls or WallWork(0.0, last_contact.wall_reactions, state.t)
         integrator.carry_on(resumed.carried)
+        changes = resumed.changes
     else:
         try:
             history = ContactHistory(**friction0) if friction0 is not None else None
             state = integrator.initial_state(x0=x0, v0=v0, history=history)
         except PenetrationError as exc:
             raise InitialStateError(f"walls: a grain starts behind a wall ({exc})") from None
-        stats, frame = RunStats(), 0
+        stats, frame, changes = RunStats(), 0, []
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
         walls = WallWork(0.0, last_contact.wall_reactions, state.t)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact, walls.work)
-        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried())
+        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried(), changes)
     last = {"shown": time.perf_counter(), "saved": time.perf_counter()}
     # Only an integrator that carries nothing between its steps but the checkpointed state and step
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
@@ -100,7 +102,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             control(st, info)
         if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
             # `frame` counts the frames written: a resumed run writes frame + 1 at its time
-            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls, integrator.carried())
+            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls, integrator.carried(), changes)
             last["saved"] = time.perf_counter()
         if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
             last["shown"] = time.perf_counter()
@@ -120,7 +122,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             writer.write(state, last["info"].strain_energy, last_contact, walls.work)
             if on_frame is not None:
                 on_frame(frame, state, last_contact)
-            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried())
+            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried(), changes)
             last["saved"] = time.perf_counter()
             if progress:
                 taken = stats.accepted - steps_before
@@ -132,7 +134,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             stopped = stop is not None and stop(state)
     finally:
         writer.close()
-    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start, out_dir)
+    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start, out_dir, changes)
 
 
 def _n_frames(duration: float, every: float) -> int:

@@ -121,6 +121,9 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,
+        # step-control keys a --resume changed, each {key, then, now, time, frame}: [] for a run stepped as
+        # configured from its start (docs/errors.md)
+        "resume_changes": run.resume_changes,
         # the kernels the run rounded with (OpenBLAS's, numba's target): runs on two machines agree to
         # the bit where these do (docs/errors.md)
         "kernels": kernels(),

@@ -26,6 +26,7 @@ from ..config import ConfigError, tables
 from ..config.tables import SETTLING_DAMPING
 from ..config.build import resolve_path, scene_from, solver_options_from
 from ..contact.walls import box_walls
+from ..driver.checkpoint import CheckpointError, step_changes
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..geometry.packing import column_packing
@@ -112,12 +113,24 @@ def _stage_fingerprint(pack_dir: Path):
         return None
 
 
+def _steps_only(stage_dir: Path, identity) -> bool:
+    """Whether a finished stage's config differs from `identity` in step-control keys alone."""
+    try:
+        step_changes(stage_dir / "checkpoint.npz", identity)
+    except CheckpointError:
+        return False
+    return True
+
+
 def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = False) -> None:
     """Settle a pack stage into pack_dir, unless it holds one settled from the same pack config
-    (kept); one from another config is refused. An interrupted stage is continued by resume."""
+    (kept); one from another config is refused. An interrupted stage is continued by resume. A
+    resume that changed the step control only (driver.checkpoint.step_changes) keeps a settled
+    pack as it is: the change is for the stage that goes on, and recorded there."""
     pack_dir = Path(pack_dir)
     if (pack_dir / "summary.json").is_file():
-        if not run_identity(pack_cfg, SCHEMA).accepts(_stage_fingerprint(pack_dir)):
+        identity = run_identity(pack_cfg, SCHEMA)
+        if not (identity.accepts(_stage_fingerprint(pack_dir)) or resume and _steps_only(pack_dir, identity)):
             raise ConfigError(f"pack: {pack_dir} holds a pack settled from a different [pack] table or material; "
                               "use another --out, or --overwrite to settle it again")  # fmt: skip
         return
@@ -155,9 +168,11 @@ def reequilibrated(state: GranularState, cfg: dict, folder: Path, progress=None,
     with the run."""
     meta = state.meta
     stage = dict(cfg, settle=dict(cfg["settle"], min_time=0.0), solver=dict(cfg["solver"], mass_damping=SETTLING_DAMPING))
-    identity = run_identity({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")})
-    if (folder / "summary.json").is_file() and identity.accepts(_stage_fingerprint(folder)):
-        return load_state(folder / "state.npz")
+    identity = run_identity({"reequilibrate": stage, "pack_time": meta.get("time"), "seed": meta.get("seed")},
+                            solver_at="reequilibrate.solver")  # fmt: skip
+    if (folder / "summary.json").is_file():
+        if identity.accepts(_stage_fingerprint(folder)) or resume and _steps_only(folder, identity):
+            return load_state(folder / "state.npz")
     scene = scene_from(state.grains, stage, box_walls(*meta["box"], meta["floor"], tuple(meta["centre"])))
     integrator = make_integrator(solver_options_from(stage), scene)
     label = progress and (lambda i, n, text="": progress(i, n, "re-equilibrate: " + text))
