@@ -205,31 +205,28 @@ def test_bad_checkpoint_is_one_line_and_never_suggests_pickle(tmp_path, cli, con
     assert "pickle" not in err
 
 
-@pytest.mark.parametrize("carried", ["{not json", "[1, 2]", '{"linear": {"hold": "two"}}', '{"linear": {"hold": true}}'],
-                         ids=["not JSON", "a list", "a text counter", "a boolean counter"])  # fmt: skip
-def test_checkpoint_with_a_damaged_carried_entry_is_one_line(tmp_path, cli, carried):
-    """The integrator's own part of a checkpoint (the linear solver's counters and hold) is read with
-    the rest: a damaged entry is the checkpoint's one-line error, not a traceback from the solver."""
+DAMAGED_ENTRIES = {
+    "carried, not JSON": ("carried", "{not json"),
+    "carried, a list": ("carried", "[1, 2]"),
+    "carried, a text counter": ("carried", '{"linear": {"hold": "two"}}'),
+    "carried, a boolean counter": ("carried", '{"linear": {"hold": true}}'),
+    "resume_changes, not JSON": ("resume_changes", "{not json"),
+    "resume_changes, an object": ("resume_changes", '{"key": "solver.dt"}'),
+    "resume_changes, numbers": ("resume_changes", "[1, 2]"),
+}
+
+
+@pytest.mark.parametrize("entry, content", list(DAMAGED_ENTRIES.values()), ids=list(DAMAGED_ENTRIES))
+def test_checkpoint_with_a_damaged_entry_is_one_line(tmp_path, cli, entry, content):
+    """The integrator's own part of a checkpoint (the linear solver's counters and hold) and the earlier
+    resumes' step-control changes are read with the rest: a damaged entry is the checkpoint's one-line
+    error, not a traceback from the solver or the summary."""
     path = good_drop(tmp_path)
     out = tmp_path / "out"
     assert cli("run", path, "--out", out, "--quiet")[0] == 0
     with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
         entries = {k: d[k] for k in d.files}
-    entries["carried"] = np.array(carried)
-    np.savez(out / "checkpoint.npz", **entries)
-    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
-    assert_one_line_error(code, err, "checkpoint.npz")
-
-
-@pytest.mark.parametrize("changes", ["{not json", '{"key": "solver.dt"}', "[1, 2]"],
-                         ids=["not JSON", "an object", "numbers"])  # fmt: skip
-def test_checkpoint_with_damaged_resume_changes_is_one_line(tmp_path, cli, changes):
-    path = good_drop(tmp_path)
-    out = tmp_path / "out"
-    assert cli("run", path, "--out", out, "--quiet")[0] == 0
-    with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
-        entries = {k: d[k] for k in d.files}
-    entries["resume_changes"] = np.array(changes)
+    entries[entry] = np.array(content)
     np.savez(out / "checkpoint.npz", **entries)
     code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
     assert_one_line_error(code, err, "checkpoint.npz")
