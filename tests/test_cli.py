@@ -1,6 +1,7 @@
 """The command line: `vemdem run`, `vemdem example`, and config errors (exit status 2)."""
 
 import json
+import re
 import subprocess
 import sys
 import tomllib
@@ -172,10 +173,14 @@ def test_long_frames_still_report_progress(tmp_path, monkeypatch):
     cfg, module = checked_config(raw)
     calls = []
     monkeypatch.setattr(loop, "PROGRESS_EVERY_S", 0.0)
-    module.run(cfg, tmp_path / "out", progress=lambda done, total, text="": calls.append((done, total, text)))
+    summary = module.run(cfg, tmp_path / "out", progress=lambda done, total, text="": calls.append((done, total, text)))
     inside = [c for c in calls if "inside frame" in c[2]]
     frames = [c for c in calls if "steps/s" in c[2]]
     assert [c[0] for c in frames] == [1, 2] and all(c[1] == 2 for c in calls)
+    # an implicit frame's line says Newton's iterations per step: the run's mean lies between the frames'
+    per_frame = [float(re.search(r", ([0-9.]+) Newton it\./step$", c[2]).group(1)) for c in frames]
+    assert min(per_frame) - 0.05 <= summary["newton_iterations_per_step"] <= max(per_frame) + 0.05
+    assert summary["newton_iterations_per_step"] >= 1
     assert inside and all(c[2].startswith("t = ") for c in inside)
     # a step line carries the frame done so far: the bar never runs ahead of the frames written
     assert [c[0] for c in inside] == sorted(c[0] for c in inside) and max(c[0] for c in inside) <= 1

@@ -115,7 +115,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         while frame < n_frames and not stopped:
             t_next = min((frame + 1) * every, duration)
             t_wall = time.perf_counter()
-            steps_before, t_before = stats.accepted, state.t
+            steps_before, t_before, newton_before = stats.accepted, state.t, stats.newton_iterations
             state, stats = integrator.advance(state, t_next, on_step, stats)
             frame += 1
             last_contact = last["info"].contact
@@ -129,7 +129,10 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
                 rate = taken / max(time.perf_counter() - t_wall, 1e-9)
                 # the frame's mean step: its last one is cut to land on the frame's time
                 mean_dt = (state.t - t_before) / max(taken, 1)
-                progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, mean dt = {mean_dt:.2e} s")
+                # implicit: Newton's iterations per step, what a stalled run's budget is judged by (docs/errors.md)
+                newton = (stats.newton_iterations - newton_before) / max(taken, 1)
+                per_step = f", {newton:.1f} Newton it./step" if newton > 0 else ""
+                progress(frame, n_frames, f"t = {state.t:.4g} s, {rate:.1f} steps/s, mean dt = {mean_dt:.2e} s{per_step}")
                 last["shown"] = time.perf_counter()
             stopped = stop is not None and stop(state)
     finally:
