@@ -2,6 +2,8 @@
 
     vemdem run CONFIG.toml --out DIR     run the scenario a config describes
     vemdem example [NAME]                print an example config (no NAME: list them)
+    vemdem status DIR [--json]           where a run in DIR stands (its stages too), from its
+                                         checkpoint and summary, without its config
     vemdem sweep CONFIG.toml --set KEY=V1,V2,... [--set ...] [--zip] --out DIR
                                          run one case per parameter set in parallel on Dask
                                          (a local cluster, or --scheduler ADDRESS); writes
@@ -15,16 +17,18 @@ names the cause; results written so far stay in DIR). A sweep exits 0 when some 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import sys
+import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from . import sweep
 from .config import ConfigError, load_toml
-from .driver.checkpoint import CheckpointError
+from .driver.checkpoint import CheckpointError, checkpoint_books
 from .driver.loop import InitialStateError
 from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_text
 
@@ -55,6 +59,9 @@ def _parser() -> argparse.ArgumentParser:
     mode.add_argument("--overwrite", action="store_true", help="replace the results of an earlier run in DIR")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")
+    st = sub.add_parser("status", help="where a run stands: time, steps, Newton iterations, from its checkpoint")
+    st.add_argument("out", type=Path, metavar="DIR", help="the run's output folder (as given to run --out)")
+    st.add_argument("--json", action="store_true", help="print the status as JSON")
     _add_sweep_parser(sub)
     return p
 
@@ -231,6 +238,67 @@ def cmd_sweep(args) -> int:
     return 1 if failed == len(cases) else 0
 
 
+# the stages a scenario runs into subfolders of its DIR before its own (scenarios.pack)
+STAGE_FOLDERS = ("pack", "reequilibrate")
+
+
+def run_status(folder: Path) -> dict | None:
+    """One folder's status: its checkpoint's books (checkpoint_books) and, once finished, the summary's
+    scenario and wall time; None for a folder that holds no run."""
+    summary, checkpoint = folder / "summary.json", folder / "checkpoint.npz"
+    if not (summary.is_file() or checkpoint.is_file()):
+        return None
+    status = {"folder": str(folder), "finished": summary.is_file()}
+    if checkpoint.is_file():
+        status.update(checkpoint_books(checkpoint), checkpoint_age_s=time.time() - checkpoint.stat().st_mtime)
+    if summary.is_file():
+        try:
+            done = json.loads(summary.read_text())
+        except (OSError, ValueError) as exc:
+            raise CheckpointError(f"{summary} is not readable ({type(exc).__name__})") from None
+        status.update(scenario=done.get("scenario"), wall_seconds=done.get("wall_seconds"))
+        status.setdefault("time", done.get("simulated_time"))
+        status.setdefault("n_steps", done.get("n_steps"))
+    return status
+
+
+def _status_line(s: dict) -> str:
+    if s["finished"]:
+        head = f"{s['folder']}: finished ({s.get('scenario')}, {s.get('wall_seconds') or 0:.0f} s wall)"
+    else:
+        head = f"{s['folder']}: not finished, checkpoint written {s['checkpoint_age_s'] / 60:.1f} min ago"
+    parts = [head]
+    if s.get("time") is not None:
+        parts.append(f"t = {s['time']:.6g} s" + (f" (frame {s['frame']})" if "frame" in s else ""))
+    if "step" in s:
+        causes = ", ".join(f"{k} {v:,}" for k, v in s["rejections"].items())
+        parts.append(f"{s['n_steps']:,} steps, {s['n_rejected_steps']:,} rejected" + (f" ({causes})" if causes else ""))
+        if s["n_newton_iterations"]:
+            parts.append(f"{s['newton_iterations_per_step']:.1f} Newton it./step")
+        parts.append(f"step {s['step']:.3g} s")
+    lines = ["; ".join(parts)]
+    for c in s.get("resume_changes", []):
+        lines.append(f"  resumed at t = {c['time']:.6g} s with {c['key']} {c['then']} -> {c['now']}")
+    return "\n".join(lines)
+
+
+def cmd_status(args) -> int:
+    try:
+        found = [run_status(f) for f in (args.out, *(args.out / name for name in STAGE_FOLDERS))]
+    except CheckpointError as exc:
+        print(f"vemdem: status: {exc}", file=sys.stderr)
+        return 2
+    found = [s for s in found if s is not None]
+    if not found:
+        print(f"vemdem: status: {args.out} holds no run (no checkpoint.npz or summary.json)", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(found, indent=2))
+    else:
+        print("\n".join(_status_line(s) for s in found))
+    return 0
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Warnings meant for the user, as the one line they are (no source location)."""
     print(f"vemdem: warning: {message}", file=file or sys.stderr)
@@ -239,7 +307,7 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _one_line_warning
-    return {"run": cmd_run, "example": cmd_example, "sweep": cmd_sweep}[args.command](args)
+    return {"run": cmd_run, "example": cmd_example, "status": cmd_status, "sweep": cmd_sweep}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -128,6 +128,24 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> 
     return resumed
 
 
+def checkpoint_books(path: Path) -> dict:
+    """Where the run at a checkpoint stands, read without its config (`vemdem status`): simulated time,
+    frames written, the step it goes on with, the books of steps and iterations, earlier resumes' changes.
+    A CheckpointError naming the file when it cannot be read."""
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            stats = _run_stats(d)
+            books = {"time": float(d["t"]), "frame": int(d["frame"]), "step": float(d["dt"]),
+                     "n_steps": stats.accepted, "n_rejected_steps": stats.rejected,
+                     "rejections": dict(sorted(stats.rejections.items())),
+                     "n_newton_iterations": stats.newton_iterations, "n_krylov_iterations": stats.krylov_iterations,
+                     "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
+                     "n_energy_gain_steps": stats.energy_gains, "resume_changes": _earlier_changes(d)}  # fmt: skip
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise CheckpointError(f"{path} is not a readable checkpoint ({type(exc).__name__})") from None
+    return books
+
+
 def step_changes(path: Path, identity: RunIdentity) -> list[dict]:
     """What load_checkpoint would accept of `identity` against the checkpoint at `path`, without
     loading the run: [] for the same config, the changed step-control keys ({key, then, now}), or a

@@ -1,0 +1,50 @@
+"""`vemdem status DIR`: where a run stands, read from its checkpoint and summary without its config.
+Its figures are the run's own books: those summary.json writes at the end, those the checkpoint
+carries before it."""
+
+import json
+
+import numpy as np
+import tomli_w
+from test_run_identity import drop_raw, interrupted
+
+from vemdem.scenarios import scene as scene_mod
+from vemdem.scenarios.registry import checked_config
+
+
+def test_a_finished_run_reports_its_summary_books(tmp_path, cli):
+    cfg, _ = checked_config(drop_raw())
+    summary = scene_mod.run(cfg, tmp_path / "run")
+    code, out, err = cli("status", tmp_path / "run", "--json")
+    assert code == 0 and err == ""
+    (entry,) = json.loads(out)
+    assert entry["finished"] and entry["scenario"] == "scene"
+    for key in ("n_steps", "n_rejected_steps", "n_newton_iterations", "newton_iterations_per_step", "resume_changes"):
+        assert entry[key] == summary[key], key
+    assert entry["time"] == summary["simulated_time"]
+    code, out, _ = cli("status", tmp_path / "run")
+    assert out.startswith(f"{tmp_path / 'run'}: finished (scene, ") and f"{summary['n_steps']:,} steps" in out
+
+
+def test_an_interrupted_run_reports_its_checkpoint_and_later_its_resume_changes(tmp_path, cli, monkeypatch):
+    cfg, _ = checked_config(drop_raw())
+    interrupted(cfg, tmp_path / "cut", monkeypatch, after=2)  # the initial state and the first frame
+    with np.load(tmp_path / "cut/checkpoint.npz") as d:
+        steps, t = int(d["accepted"]), float(d["t"])
+    code, out, _ = cli("status", tmp_path / "cut")
+    assert code == 0
+    assert "not finished, checkpoint written " in out
+    assert f"t = {t:.6g} s (frame 1)" in out and f"{steps:,} steps" in out
+    (tmp_path / "job.toml").write_text(tomli_w.dumps(drop_raw(max_iterations=30)))
+    assert cli("run", tmp_path / "job.toml", "--out", tmp_path / "cut", "--quiet", "--resume")[0] == 0
+    code, out, _ = cli("status", tmp_path / "cut")
+    assert out.splitlines()[1] == "  resumed at t = 0.001 s with solver.max_iterations 15 -> 30"
+
+
+def test_a_folder_without_a_run_or_with_a_damaged_checkpoint_is_one_line(tmp_path, cli):
+    code, out, err = cli("status", tmp_path)
+    assert code == 2 and out == ""
+    assert err.strip() == f"vemdem: status: {tmp_path} holds no run (no checkpoint.npz or summary.json)"
+    (tmp_path / "checkpoint.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)
+    code, _, err = cli("status", tmp_path)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "checkpoint.npz is not a readable checkpoint" in err
