@@ -86,7 +86,7 @@ def run_one(name: str, out: Path, grains: int | None, **options) -> dict:
 
 
 def row(name: str, s: dict, target: float) -> str:
-    wall = s["wall_seconds"]
+    wall = s.get("wall_seconds_total") or s["wall_seconds"]  # a resumed run: every part
     steps = s["n_steps"]
     figures = ", ".join(f"{k} {s[k]:.4g}" for k in HEADLINES if isinstance(s.get(k), int | float))
     back = s.get("spring_back", {})

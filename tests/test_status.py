@@ -5,6 +5,7 @@ carries before it."""
 import json
 
 import numpy as np
+import pytest
 import tomli_w
 from test_run_identity import drop_raw, interrupted
 
@@ -33,7 +34,7 @@ def test_an_interrupted_run_reports_its_checkpoint_and_later_its_resume_changes(
         steps, t = int(d["accepted"]), float(d["t"])
     code, out, _ = cli("status", tmp_path / "cut")
     assert code == 0
-    assert "not finished, checkpoint written " in out
+    assert "not finished, checkpoint written " in out and " min of wall time so far" in out
     assert f"t = {t:.6g} s (frame 1)" in out and f"{steps:,} steps" in out
     (tmp_path / "job.toml").write_text(tomli_w.dumps(drop_raw(max_iterations=30)))
     assert cli("run", tmp_path / "job.toml", "--out", tmp_path / "cut", "--quiet", "--resume")[0] == 0
@@ -48,3 +49,21 @@ def test_a_folder_without_a_run_or_with_a_damaged_checkpoint_is_one_line(tmp_pat
     (tmp_path / "checkpoint.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)
     code, _, err = cli("status", tmp_path)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "checkpoint.npz is not a readable checkpoint" in err
+
+
+def test_the_wall_time_adds_up_over_the_parts_of_a_resumed_run(tmp_path, monkeypatch):
+    cfg, _ = checked_config(drop_raw())
+    whole = scene_mod.run(cfg, tmp_path / "whole")
+    assert whole["wall_seconds_total"] == whole["wall_seconds"]
+    interrupted(cfg, tmp_path / "cut", monkeypatch, after=2)
+    with np.load(tmp_path / "cut/checkpoint.npz") as d:
+        earlier = float(d["wall_seconds"])
+    assert earlier > 0
+    resumed = scene_mod.run(cfg, tmp_path / "cut", resume=True)
+    assert resumed["wall_seconds_total"] == pytest.approx(earlier + resumed["wall_seconds"], rel=1e-12)
+    # a checkpoint from before session 63 kept no wall time: the total is unknown, not the last part's
+    interrupted(cfg, tmp_path / "old", monkeypatch, after=2)
+    with np.load(tmp_path / "old/checkpoint.npz") as d:
+        entries = {k: d[k] for k in d.files if k != "wall_seconds"}
+    np.savez(tmp_path / "old/checkpoint.npz", **entries)
+    assert scene_mod.run(cfg, tmp_path / "old", resume=True)["wall_seconds_total"] is None

@@ -256,17 +256,21 @@ def run_status(folder: Path) -> dict | None:
             done = json.loads(summary.read_text())
         except (OSError, ValueError) as exc:
             raise CheckpointError(f"{summary} is not readable ({type(exc).__name__})") from None
-        status.update(scenario=done.get("scenario"), wall_seconds=done.get("wall_seconds"))
+        status.update(scenario=done.get("scenario"), wall_seconds=done.get("wall_seconds"),
+                      wall_seconds_total=done.get("wall_seconds_total"))  # fmt: skip
         status.setdefault("time", done.get("simulated_time"))
         status.setdefault("n_steps", done.get("n_steps"))
     return status
 
 
 def _status_line(s: dict) -> str:
+    total = s.get("wall_seconds_total")
     if s["finished"]:
-        head = f"{s['folder']}: finished ({s.get('scenario')}, {s.get('wall_seconds') or 0:.0f} s wall)"
+        wall = total if total is not None else s.get("wall_seconds") or 0.0
+        head = f"{s['folder']}: finished ({s.get('scenario')}, {wall:.0f} s wall)"
     else:
-        head = f"{s['folder']}: not finished, checkpoint written {s['checkpoint_age_s'] / 60:.1f} min ago"
+        so_far = "" if total is None else f", {total / 60:.1f} min of wall time so far"
+        head = f"{s['folder']}: not finished, checkpoint written {s['checkpoint_age_s'] / 60:.1f} min ago{so_far}"
     parts = [head]
     if s.get("time") is not None:
         parts.append(f"t = {s['time']:.6g} s" + (f" (frame {s['frame']})" if "frame" in s else ""))

@@ -59,9 +59,10 @@ class WallWork:
 
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
                     identity: RunIdentity, walls: WallWork | None = None, carried: dict | None = None,
-                    changes: list | None = None):  # fmt: skip
+                    changes: list | None = None, wall_seconds: float | None = None):  # fmt: skip
     """`carried`: the integrator's own (Integrator.carried), e.g. the linear solver's hold; `changes`: the
-    step-control keys earlier resumes changed (Resumed.changes)."""
+    step-control keys earlier resumes changed (Resumed.changes); `wall_seconds`: the time-loop's wall time
+    of the run so far, all its parts (None: unknown, a run resumed from a checkpoint that kept none)."""
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
     books = {} if walls is None else {"wall_work": walls.work, "wall_force": walls.force, "wall_t": walls.t}
@@ -75,6 +76,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              damping_hold_steps=stats.damping_hold_steps, tangent_blocks=stats.tangent_blocks,
              exact_tangent_blocks=stats.exact_tangent_blocks,
              carried=json.dumps(carried or {}, sort_keys=True), resume_changes=json.dumps(changes or []), **books,
+             **({} if wall_seconds is None else {"wall_seconds": wall_seconds}),
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -85,7 +87,9 @@ class Resumed:
     a checkpoint written before session 21 (the walls' work book then starts again at the resume);
     `carried` is {} for one written before session 32 (the linear solver then starts afresh).
     `changes`: the step-control keys this and earlier resumes changed, each {key, then, now, time,
-    frame} (summary.json "resume_changes"); [] for a run resumed as it was started."""
+    frame} (summary.json "resume_changes"); [] for a run resumed as it was started. `wall_seconds`:
+    the time loop's wall time up to the checkpoint, over all parts; None for one written before
+    session 63."""
 
     state: State
     stats: RunStats
@@ -93,6 +97,7 @@ class Resumed:
     walls: WallWork | None
     carried: dict
     changes: list = field(default_factory=list)
+    wall_seconds: float | None = None
 
 
 def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> Resumed:
@@ -111,7 +116,8 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> 
                           bodies)  # fmt: skip
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
-            resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d))
+            resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d),
+                              float(d["wall_seconds"]) if "wall_seconds" in d.files else None)  # fmt: skip
     except CheckpointError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
@@ -140,7 +146,8 @@ def checkpoint_books(path: Path) -> dict:
                      "rejections": dict(sorted(stats.rejections.items())),
                      "n_newton_iterations": stats.newton_iterations, "n_krylov_iterations": stats.krylov_iterations,
                      "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
-                     "n_energy_gain_steps": stats.energy_gains, "resume_changes": _earlier_changes(d)}  # fmt: skip
+                     "n_energy_gain_steps": stats.energy_gains, "resume_changes": _earlier_changes(d),
+                     "wall_seconds_total": float(d["wall_seconds"]) if "wall_seconds" in d.files else None}  # fmt: skip
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         raise CheckpointError(f"{path} is not a readable checkpoint ({type(exc).__name__})") from None
     return books

@@ -51,6 +51,8 @@ class Run:
     wall_seconds: float = 0.0
     out_dir: Path | None = None  # where its frames are (summary: the energy balance from history.csv)
     resume_changes: list = field(default_factory=list)  # step-control keys resumes changed (checkpoint.Resumed)
+    # the time loop's wall time of the parts before this one (a resumed run; None: a checkpoint kept none)
+    earlier_wall_seconds: float | None = 0.0
 
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
@@ -65,6 +67,11 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
     steps = integrator.control
     ckpt = out_dir / "checkpoint.npz"
     n_frames = _n_frames(duration, every)
+
+    def checkpoint(st: State, frames_written: int) -> None:
+        wall = None if earlier is None else earlier + time.perf_counter() - t_start
+        save_checkpoint(ckpt, st, steps, stats, frames_written, identity, walls, integrator.carried(), changes, wall)
+
     if resume:
         resumed = load_checkpoint(ckpt, steps, identity)
         state, stats, frame = resumed.state, resumed.stats, resumed.frame
@@ -74,19 +81,19 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         walls = resumed.walls or WallWork(0.0, last_contact.wall_reactions, state.t)
         integrator.carry_on(resumed.carried)
-        changes = resumed.changes
+        changes, earlier = resumed.changes, resumed.wall_seconds
     else:
         try:
             history = ContactHistory(**friction0) if friction0 is not None else None
             state = integrator.initial_state(x0=x0, v0=v0, history=history)
         except PenetrationError as exc:
             raise InitialStateError(f"walls: a grain starts behind a wall ({exc})") from None
-        stats, frame, changes = RunStats(), 0, []
+        stats, frame, changes, earlier = RunStats(), 0, [], 0.0
         writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
         last_contact = contact_now(scene, state)
         walls = WallWork(0.0, last_contact.wall_reactions, state.t)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact, walls.work)
-        save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried(), changes)
+        checkpoint(state, frame)
     last = {"shown": time.perf_counter(), "saved": time.perf_counter()}
     # Only an integrator that carries nothing between its steps but the checkpointed state and step
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
@@ -102,7 +109,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             control(st, info)
         if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
             # `frame` counts the frames written: a resumed run writes frame + 1 at its time
-            save_checkpoint(ckpt, st, steps, stats, frame, identity, walls, integrator.carried(), changes)
+            checkpoint(st, frame)
             last["saved"] = time.perf_counter()
         if progress and time.perf_counter() - last["shown"] >= PROGRESS_EVERY_S:
             last["shown"] = time.perf_counter()
@@ -122,7 +129,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             writer.write(state, last["info"].strain_energy, last_contact, walls.work)
             if on_frame is not None:
                 on_frame(frame, state, last_contact)
-            save_checkpoint(ckpt, state, steps, stats, frame, identity, walls, integrator.carried(), changes)
+            checkpoint(state, frame)
             last["saved"] = time.perf_counter()
             if progress:
                 taken = stats.accepted - steps_before
@@ -137,7 +144,8 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
             stopped = stop is not None and stop(state)
     finally:
         writer.close()
-    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start, out_dir, changes)
+    return Run(state, stats, bool(stopped), last_contact, integrator, time.perf_counter() - t_start, out_dir, changes,
+               earlier)  # fmt: skip
 
 
 def _n_frames(duration: float, every: float) -> int:

@@ -91,6 +91,7 @@ def friction_reach(history_csv, activation_gap: float, tangential_penalty: float
 def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = None) -> dict:
     """t_start: perf_counter() when the scenario began (building included); else the loop's own time."""
     stats, state = run.stats, run.state
+    wall = run.wall_seconds if t_start is None else time.perf_counter() - t_start
     return {
         "scenario": scenario,
         "integrator": run.integrator.name,
@@ -120,7 +121,10 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "n_exact_tangent_blocks": stats.exact_tangent_blocks,
         "simulated_time": state.t,
         "mean_time_step": state.t / max(stats.accepted, 1),
-        "wall_seconds": run.wall_seconds if t_start is None else time.perf_counter() - t_start,
+        "wall_seconds": wall,
+        # over every part of a resumed run (each part's time loop up to its last checkpoint, then this one's
+        # wall_seconds); None where a part's checkpoint kept no wall time (before session 63)
+        "wall_seconds_total": None if run.earlier_wall_seconds is None else run.earlier_wall_seconds + wall,
         # step-control keys a --resume changed, each {key, then, now, time, frame}: [] for a run stepped as
         # configured from its start (docs/errors.md)
         "resume_changes": run.resume_changes,
