@@ -19,11 +19,11 @@ def test_a_finished_run_reports_its_summary_books(tmp_path, cli):
     code, out, err = cli("status", tmp_path / "run", "--json")
     assert code == 0 and err == ""
     (entry,) = json.loads(out)
-    assert entry["finished"] and entry["scenario"] == "scene"
+    assert entry["finished"] and entry["scenario"] == "scene" and entry["folder"] == str(tmp_path / "run")
     for key in ("n_steps", "n_rejected_steps", "n_newton_iterations", "newton_iterations_per_step", "resume_changes"):
         assert entry[key] == summary[key], key
     assert entry["time"] == summary["simulated_time"]
-    code, out, _ = cli("status", tmp_path / "run")
+    code, out, _ = cli("status", tmp_path)  # a folder of runs (a sweep's cases): each one
     assert out.startswith(f"{tmp_path / 'run'}: finished (scene, ") and f"{summary['n_steps']:,} steps" in out
 
 
@@ -45,7 +45,8 @@ def test_an_interrupted_run_reports_its_checkpoint_and_later_its_resume_changes(
 def test_a_folder_without_a_run_or_with_a_damaged_checkpoint_is_one_line(tmp_path, cli):
     code, out, err = cli("status", tmp_path)
     assert code == 2 and out == ""
-    assert err.strip() == f"vemdem: status: {tmp_path} holds no run (no checkpoint.npz or summary.json)"
+    assert err.strip() == (f"vemdem: status: {tmp_path} holds no run (no checkpoint.npz or summary.json, nor in "
+                           "its subfolders)")
     (tmp_path / "checkpoint.npz").write_bytes(b"PK\x03\x04" + b"\x00" * 40)
     code, _, err = cli("status", tmp_path)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "checkpoint.npz is not a readable checkpoint" in err

@@ -2,8 +2,8 @@
 
     vemdem run CONFIG.toml --out DIR     run the scenario a config describes
     vemdem example [NAME]                print an example config (no NAME: list them)
-    vemdem status DIR [--json]           where a run in DIR stands (its stages too), from its
-                                         checkpoint and summary, without its config
+    vemdem status DIR [--json]           where a run in DIR stands (its stages too; or the runs in
+                                         its subfolders), from checkpoints and summaries, without configs
     vemdem sweep CONFIG.toml --set KEY=V1,V2,... [--set ...] [--zip] --out DIR
                                          run one case per parameter set in parallel on Dask
                                          (a local cluster, or --scheduler ADDRESS); writes
@@ -286,15 +286,28 @@ def _status_line(s: dict) -> str:
     return "\n".join(lines)
 
 
+def _statuses(folder: Path) -> list[dict]:
+    """The run in `folder` and its stages; for a folder that holds none itself, the runs in its
+    subfolders (a sweep's case_*, bench_paper's runs)."""
+    found = _statuses_here(folder)
+    if found or not folder.is_dir():
+        return found
+    return [s for sub in sorted(p for p in folder.iterdir() if p.is_dir()) for s in _statuses_here(sub)]
+
+
+def _statuses_here(folder: Path) -> list[dict]:
+    return [s for s in map(run_status, (folder, *(folder / name for name in STAGE_FOLDERS))) if s is not None]
+
+
 def cmd_status(args) -> int:
     try:
-        found = [run_status(f) for f in (args.out, *(args.out / name for name in STAGE_FOLDERS))]
+        found = _statuses(args.out)
     except CheckpointError as exc:
         print(f"vemdem: status: {exc}", file=sys.stderr)
         return 2
-    found = [s for s in found if s is not None]
     if not found:
-        print(f"vemdem: status: {args.out} holds no run (no checkpoint.npz or summary.json)", file=sys.stderr)
+        print(f"vemdem: status: {args.out} holds no run (no checkpoint.npz or summary.json, nor in its subfolders)",
+              file=sys.stderr)  # fmt: skip
         return 2
     if args.json:
         print(json.dumps(found, indent=2))
