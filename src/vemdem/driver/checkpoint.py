@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import warnings
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..contact.model import ContactHistory
+from ..io.state import UNREADABLE_NPZ
 from ..solver.state import RunStats, State, StepControl
 
 
@@ -108,8 +108,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> 
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
         with np.load(path, allow_pickle=False) as d:
-            then = json.loads(str(d["choices"])) if "choices" in d.files else None
-            changes = [] if identity.accepts(str(d["fingerprint"])) else _step_changes(path, then, identity)
+            changes = _config_changes(d, path, identity)
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
             bodies = {k.removeprefix("body_"): d[k] for k in d.files if k.startswith("body_")}
             state = State(float(d["t"]), d["x"], d["v"], d["a"], history, float(d["dissipated"]), float(d["power"]),
@@ -117,10 +116,10 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> 
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
             resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d),
-                              float(d["wall_seconds"]) if "wall_seconds" in d.files else None)  # fmt: skip
+                              _wall_seconds(d))  # fmt: skip
     except CheckpointError:
         raise
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+    except UNREADABLE_NPZ as exc:
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__}); "
                               "remove it and run again without --resume") from None  # fmt: skip
     if changes:
@@ -147,8 +146,8 @@ def checkpoint_books(path: Path) -> dict:
                      "n_newton_iterations": stats.newton_iterations, "n_krylov_iterations": stats.krylov_iterations,
                      "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
                      "n_energy_gain_steps": stats.energy_gains, "resume_changes": _earlier_changes(d),
-                     "wall_seconds_total": float(d["wall_seconds"]) if "wall_seconds" in d.files else None}  # fmt: skip
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+                     "wall_seconds_total": _wall_seconds(d)}  # fmt: skip
+    except UNREADABLE_NPZ as exc:
         raise CheckpointError(f"{path} is not a readable checkpoint ({type(exc).__name__})") from None
     return books
 
@@ -159,17 +158,20 @@ def step_changes(path: Path, identity: RunIdentity) -> list[dict]:
     CheckpointError naming the other keys that changed (a finished stage asks this of its own)."""
     try:
         with np.load(path, allow_pickle=False) as d:
-            if identity.accepts(str(d["fingerprint"])):
-                return []
-            then = json.loads(str(d["choices"])) if "choices" in d.files else None
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            return _config_changes(d, path, identity)
+    except CheckpointError:  # a ValueError too: the refusal itself, not an unreadable file
+        raise
+    except UNREADABLE_NPZ as exc:
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__})") from None
-    return _step_changes(path, then, identity)
 
 
-def _step_changes(path: Path, then: dict | None, identity: RunIdentity) -> list[dict]:
-    """The step-control keys a resumed config changed, each {key, then, now}; a CheckpointError naming the
-    first keys that differ when any other key changed (or the checkpoint keeps no choices to compare)."""
+def _config_changes(d, path: Path, identity: RunIdentity) -> list[dict]:
+    """The step-control keys a resumed config changed against the open checkpoint `d`, each {key, then,
+    now} ([] for the same config); a CheckpointError naming the first keys that differ when any other key
+    changed (or the checkpoint keeps no choices to compare)."""
+    if identity.accepts(str(d["fingerprint"])):
+        return []
+    then = json.loads(str(d["choices"])) if "choices" in d.files else None
     refused = f"--resume: {path} was written by a different config"
     if then is None:
         raise CheckpointError(refused)
@@ -184,6 +186,11 @@ def _step_changes(path: Path, then: dict | None, identity: RunIdentity) -> list[
         return tree.get(k, identity.adjustable[k])
 
     return [{"key": k, "then": value(old, k), "now": value(new, k)} for k in keys]
+
+
+def _wall_seconds(d) -> float | None:
+    """The time loop's wall time over the run's parts (checkpoints before session 63 keep none)."""
+    return float(d["wall_seconds"]) if "wall_seconds" in d.files else None
 
 
 def _earlier_changes(d) -> list:

@@ -20,6 +20,10 @@ import numpy as np
 
 from ..geometry.polyhedron import Polyhedron
 
+# what reading a damaged or foreign .npz raises (np.load, a missing entry, a bad JSON entry): the state
+# files here and the checkpoints (driver.checkpoint)
+UNREADABLE_NPZ = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
+
 FORMAT = "vemdem-state-1"
 
 
@@ -71,7 +75,7 @@ def load_state(path: Path) -> GranularState:
                   for i in range(len(vptr) - 1)]  # fmt: skip
         x, v, meta = d["x"], d["v"], json.loads(str(d["meta"]))
         friction = {k: d[f"friction_{k}"] for k in FRICTION_FIELDS} if "friction_keys" in d.files else None
-    except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+    except UNREADABLE_NPZ as exc:
         if isinstance(exc, StateFileError):
             raise
         raise StateFileError(f"initial_state: {path} is not a readable vemdem state file ({type(exc).__name__})") from None
