@@ -18,6 +18,7 @@ energy grew (docs/dynamics.md).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -323,12 +324,46 @@ def _wall_drive(contact, x, tw: float, t1: float, candidates, history, vel, a4) 
 
 
 def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameters) -> tuple[State, StepInfo]:
-    b, gam = params.beta, params.gamma
+    """One Newmark step of length dt from `state`: the step's pair search and first iterate, Newton
+    to convergence (StepRejected when it fails), then the converged state with its books."""
+    k = _newmark_constants(params.beta, params.gamma, dt)
+    t1 = state.t + dt
+    candidates, margin, x = _search_and_predict(scene, state, dt, t1, params)
+    M = scene.mass_matrix()
+    end = _newton(scene, state, x, dt, t1, k, M, candidates, margin, params)
+    return _converged_step(scene, state, dt, t1, k, M, candidates, end, params)
+
+
+def _newmark_constants(beta: float, gamma: float, dt: float) -> tuple:
+    """(a1, ..., a6): a_n+1 = a1 du - a2 v_n - a3 a_n and v_n+1 = a4 du + a5 v_n + a6 a_n, du = x_n+1 - x_n."""
+    b, gam = beta, gamma
     a1, a2, a3 = 1 / (b * dt * dt), 1 / (b * dt), 1 / (2 * b) - 1
     a4, a5, a6 = gam / (b * dt), 1 - gam / b, dt * (1 - gam / (2 * b))
-    t1 = state.t + dt
-    M = scene.mass_matrix()
-    f_grav = scene.gravity_force().ravel()
+    return a1, a2, a3, a4, a5, a6
+
+
+def _kinematics(state: State, x: np.ndarray, k: tuple):
+    """Displacement, acceleration and velocity at the step's end when the grains stand at x."""
+    a1, a2, a3, a4, a5, a6 = k
+    du = x - state.x
+    acc = a1 * du - a2 * state.v - a3 * state.a
+    vel = a4 * du + a5 * state.v + a6 * state.a
+    return du, acc, vel
+
+
+class _NewtonEnd(NamedTuple):
+    x: np.ndarray  # the converged positions
+    iterations: int
+    krylov: int  # Krylov iterations over the step's linear solves
+    frozen: FrozenPairs | None  # pairs kept in the contact set for the step (freeze_cycles)
+    held: HeldPairs  # pairs held on one friction or damping branch (break_stick_cycles, hold_damping_cycles)
+    tangent_blocks: int  # grain blocks evaluated, and of them with the exact (not the rotated) tangent
+    exact_blocks: int
+
+
+def _search_and_predict(scene: Scene, state: State, dt: float, t1: float, params: NewmarkParameters):
+    """The step's candidate pairs, their search margin, and Newton's first iterate (the predictor,
+    bounded by CCD)."""
     contact = scene.contact
     # search once per step, widened by twice the predicted travel so that pairs the step closes in on
     # are candidates from the start (without it, a grain could only creep towards the gap)
@@ -351,6 +386,16 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         _, ints0, floats0 = contact.pairs(state.x, state.t, candidates)
         path = _UpdatePath(scene, x, guess, params.update)
         x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, state.t, candidates, margin))
+    return candidates, margin, x
+
+
+def _newton(scene: Scene, state: State, x: np.ndarray, dt: float, t1: float, k: tuple, M, candidates, margin: float,
+            params: NewmarkParameters) -> _NewtonEnd:  # fmt: skip
+    """Newton's iteration on the step's residual (inertia + internal + contact - gravity) from the
+    first iterate x; StepRejected when it does not converge in params.max_iterations."""
+    a1, a4 = k[0], k[3]
+    f_grav = scene.gravity_force().ravel()
+    contact = scene.contact
     # A wall that moves further in a step than its gap to the grains (a lid pressing a pack) would
     # start Newton behind a grain's surface: the walls start where they can go and move on to t1
     # between iterations as the grains give way (wall_time); the step converges only with them at t1.
@@ -370,9 +415,7 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
     shift = a1 + params.mass_damping * a4  # the Newton matrix's mass term: K + shift M
     tangent_blocks = exact_blocks = 0
     for it in range(1, params.max_iterations + 1):
-        du = x - state.x
-        acc = a1 * du - a2 * state.v - a3 * state.a
-        vel = a4 * du + a5 * state.v + a6 * state.a
+        du, acc, vel = _kinematics(state, x, k)
         try:
             el = scene.bodies.evaluate(x, tangent=True, mass_shift=shift, rotated_strain=params.rotated_tangent)
             cr = contact.evaluate(x, tw, candidates, state.history, v=vel, a4=a4, tangent=True, frozen=frozen,
@@ -447,9 +490,16 @@ def newmark_step(scene: Scene, state: State, dt: float, params: NewmarkParameter
         full_before, dx_before = alpha == 1.0, dx_norm
     else:
         raise StepRejected(f"Newton did not converge in {params.max_iterations} iterations")
-    du = x - state.x
-    acc = a1 * du - a2 * state.v - a3 * state.a
-    vel = a4 * du + a5 * state.v + a6 * state.a
+    return _NewtonEnd(x, it, krylov, frozen, held, tangent_blocks, exact_blocks)
+
+
+def _converged_step(scene: Scene, state: State, dt: float, t1: float, k: tuple, M, candidates, end: _NewtonEnd,
+                    params: NewmarkParameters) -> tuple[State, StepInfo]:  # fmt: skip
+    """The state at Newton's converged positions: forces without tangents, the end-of-step check for
+    pairs the step's search missed, and the dissipation booked over the step."""
+    a4, gam, contact = k[3], params.gamma, scene.contact
+    x, it, krylov, frozen, held, tangent_blocks, exact_blocks = end
+    _, acc, vel = _kinematics(state, x, k)
     try:
         el = scene.bodies.evaluate(x)
         cr = contact.evaluate(x, t1, candidates, state.history, v=vel, a4=a4, **held.held())
