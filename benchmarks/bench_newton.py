@@ -41,8 +41,10 @@ import numpy as np
 import bench_dynamics as bd
 from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.walls import box_walls
+from vemdem.contact.model import ContactHistory
 from vemdem.io.state import load_state
 from vemdem.model.scene import Scene
+from vemdem.scenarios.lid_compression import lid_wall
 from vemdem.solver.explicit import FEATURE_SKIN_GAPS
 from vemdem.solver.linear import LinearSolveDiverged, make_linear_solver, woodbury
 from vemdem.solver.newmark import NewmarkParameters, advance, initial_state, newmark_step, newton_system
@@ -74,16 +76,27 @@ def tiled(grains, x, v, box, centre, nx: int, ny: int):
 
 
 def state_case(path: Path, tile: tuple[int, int] = (1, 1)):
+    """A state file's pack in its box. A lid run's state (benchmarks/jam_state.py: its record holds
+    "lid" and "contact") also gets the lid, on its way down from where it stood, the run's friction
+    and damping, and its contacts' friction history (untiled: the history's keys are the grains')."""
     s = load_state(path)
     meta = s.meta
     grains, x, v, box, centre = tiled(s.grains, s.x, s.v, meta["box"], meta["centre"], *tile)
     size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in s.grains]))
     material = Material(bd.E, bd.NU, bd.DENSITY)
-    law, friction = default_contact_laws(size, material.E, material.density, bd.GRAVITY, bd.MU_S, bd.MU_D)
+    contact = {"mu_s": bd.MU_S, "mu_d": bd.MU_D, **meta.get("contact", {})}
+    law, friction = default_contact_laws(size, material.E, material.density, bd.GRAVITY, **contact)
     walls = box_walls(*box, meta["floor"], tuple(centre))
+    history = None
+    if "lid" in meta:
+        walls.append(lid_wall(meta["lid"], centre)[0])
+        if tile == (1, 1) and s.friction is not None:
+            f = s.friction
+            history = ContactHistory(f["keys"], f["c_prev"], f["gt"], f["stick"].astype(bool))
     scene = Scene.build(grains, material, law, friction, planes=walls)
-    name = f"settled {len(grains)}" if tile == (1, 1) else f"tiled {len(grains)}"
-    return name, scene, State(0.0, x.copy(), v.copy(), np.zeros_like(x))
+    kind = "lid" if "lid" in meta else "settled"
+    name = f"{kind} {len(grains)}" if tile == (1, 1) else f"tiled {len(grains)}"
+    return name, scene, State(0.0, x.copy(), v.copy(), np.zeros_like(x), history)
 
 
 def quieted(case, seconds: float):
@@ -106,7 +119,6 @@ def run_case(config: Path, checkpoint: Path):
     import tomllib
 
     from vemdem.config.build import scene_from
-    from vemdem.contact.model import ContactHistory
     from vemdem.scenarios import pack as pack_scenario
     from vemdem.scenarios.registry import checked_config
 
