@@ -25,13 +25,13 @@ from pathlib import Path
 import numpy as np
 
 from vemdem.io.state import FRICTION_FIELDS, load_state, save_state
+from vemdem.scenarios.lid_compression import lid_wall
 from vemdem.scenarios.registry import checked_config, example_text
 
+
 def lid_height(lid: dict, t: float) -> float:
-    """The lid's height at time t of its cycle (down at `speed` from `start` to `end`, then back up)."""
-    half = (lid["start"] - lid["end"]) / lid["speed"]
-    travel = lid["speed"] * (t if t <= half else max(2.0 * half - t, 0.0))
-    return lid["start"] - travel
+    """The lid's height at time t of its cycle, as the scenario moves it (lid_compression.lid_wall)."""
+    return float(lid_wall(lid, (0.0, 0.0))[0].point_at(t)[2])
 
 
 def jam_state(checkpoint: Path, pack: Path, cfg: dict, out: Path) -> dict:
