@@ -91,3 +91,23 @@ def test_the_shipped_jam_state_is_the_515_grain_lid_in_its_jam():
     assert len(s.grains) == 515 and s.meta["scenario"] == "lid_compression"
     assert 5.0e-3 < s.meta["lid"]["start"] < 5.4e-3 and s.meta["contact"]["mu_s"] == 0.15
     assert np.all(np.isfinite(s.x)) and len(s.friction["keys"]) > 5 * 515
+
+
+def test_the_jam_bench_steps_the_rebuilt_lid_run_with_the_settings_it_is_given(interrupted, tmp_path):
+    cfg, out = interrupted
+    jam, bench = _module("jam_state"), _module("bench_jam")
+    jam.jam_state(out / "checkpoint.npz", PACK, cfg, tmp_path / "jam.npz")
+    newton = bench.newton_settings(["line_search=true", "accuracy=0.5", "ccd=pairwise"])
+    assert newton == {"line_search": True, "accuracy": 0.5, "ccd": "pairwise"}
+    integrator, state = bench.jam_integrator(tmp_path / "jam.npz", {"solver.max_iterations": 30}, newton)
+    params = integrator.params
+    assert params.max_iterations == 30 and params.line_search and params.accuracy == 0.5 and params.ccd == "pairwise"
+    assert params.gamma == 0.6 and params.linear is not None  # the rest is the example's
+    result = bench.run_jam(integrator, state, 1e-6, seconds=600.0, steps=3)
+    assert result["accepted"] == 3 and 3e-6 <= result["simulated_s"] < 1e-3
+    _, lid_fz = wall_force_record(out / "walls.csv", "lid")
+    # three steps of at most a few microseconds: the lid has hardly moved, nor has its force
+    assert result["lid_force_first"] == pytest.approx(lid_fz[-1], rel=0.2)
+    for bad in (["nope=1"], ["line_search=yes"], ["max_iterations=many"], ["linear=direct"]):
+        with pytest.raises(ValueError, match="--newton"):
+            bench.newton_settings(bad)
