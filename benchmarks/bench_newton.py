@@ -131,7 +131,18 @@ def run_case(config: Path, checkpoint: Path):
     return f"run {scene.n_grains} t={state.t:.3g}", scene, state
 
 
+# Untimed calls before the timed ones: the first calls of a piece fault in fresh memory (the 33 MB
+# of tangent blocks at 515 grains, from mmap until glibc's threshold has grown), and two threads
+# faulting pages at once are slow: the element kernel took 52-57 ms in its 2nd-4th calls and 6 ms
+# from the 5th on, on 2 threads (1 thread: 15 -> 11 ms). A run pays it in its first steps only: 13
+# of 371 element calls over 40 steps of the lid jam took about 53 ms, one of them in the last 20
+# (session 68, docs/linear-solvers.md)
+WARMUP = 4
+
+
 def best(f, repeat):
+    for _ in range(WARMUP):
+        f()
     times, out = [], None
     for _ in range(repeat):
         t = time.perf_counter()
