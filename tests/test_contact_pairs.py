@@ -371,8 +371,20 @@ def test_broad_phase_equals_brute_force(n_grains, rng):
     centres = rng.uniform(0, L, size=(n_grains, 3))
     x = (centres[:, None, :] + rng.uniform(-0.5, 0.5, size=(n_grains, 12, 3))).reshape(-1, 3)
     vptr = np.arange(n_grains + 1) * 12
+    pts = x.reshape(n_grains, 12, 3)
     for gap in (0.0, 0.05, 0.5):
-        np.testing.assert_array_equal(candidate_pairs(x, vptr, gap), brute_force_pairs(x, vptr, gap))
+        found = candidate_pairs(x, vptr, gap)
+        np.testing.assert_array_equal(found, brute_force_pairs(x, vptr, gap))
+        # the contract, from the vertices themselves and not through the package's grain_boxes:
+        # exactly the pairs whose boxes, each grown by half the activation gap, overlap
+        lo, hi = pts.min(axis=1) - 0.5 * gap, pts.max(axis=1) + 0.5 * gap
+        overlap = np.all((hi[:, None] >= lo[None]) & (hi[None] >= lo[:, None]), axis=2)
+        expected = np.column_stack(np.nonzero(np.triu(overlap, k=1)))
+        np.testing.assert_array_equal(found, expected)
+        # and so every pair of grains with two vertices closer than the gap is a candidate
+        near = {(a, b) for a in range(n_grains) for b in range(a + 1, n_grains)
+                if (np.linalg.norm(pts[a][:, None] - pts[b][None], axis=2) < gap).any()}  # fmt: skip
+        assert near <= {tuple(p) for p in found.tolist()}
 
 
 def test_pair_inverse_mass_is_the_eigenvalue_of_the_pair_spring(rng):

@@ -1,5 +1,9 @@
-"""The data behind docs/results.md's angle figure: the script reads every run's row and draws it,
-and the rows say what the docs say they say (the angle rises with friction in every series)."""
+"""The data behind docs/results.md's figures: each script reads every run's row and draws it, and
+the rows say what the docs say they say (the angle rises with friction in every series, ...).
+
+These are consistency checks of the docs against the archived outputs of their runs (docs/data),
+not verification of the code: no simulation runs here, so a regression of the physics cannot fail
+them. What verifies the code is in the other test files."""
 
 import importlib.util
 from pathlib import Path

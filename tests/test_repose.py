@@ -28,6 +28,19 @@ TOLERANCE_DEG = 2.0
 # bias -1.2 to -3.5 degrees, largest miss beyond the uncertainty 5.5 over 180 heaps (docs/repose.md).
 LOW_MOUND = 2.3 * D
 LOW_MOUND_TOLERANCE_DEG = 4.0
+# The reported uncertainty is part of each test's tolerance, so it is bounded too: a regression that
+# scattered the sectors would otherwise widen the tolerance with it. Measured on these heaps
+# (session 68): cones 0.5-2.1 deg, square pyramids 0.6-2.2, low mounds 1.0-2.7, wedges in a
+# channel 1.3-3.5, quarter heaps 0.9-2.5.
+UNCERTAINTY_CAP_DEG = 3.0
+LOW_MOUND_UNCERTAINTY_CAP_DEG = 4.0
+
+
+def assert_recovered(result, angle, tolerance, largest_uncertainty=UNCERTAINTY_CAP_DEG):
+    """The built angle within the reported uncertainty plus `tolerance`, the uncertainty at most
+    `largest_uncertainty`."""
+    assert result.uncertainty_deg <= largest_uncertainty
+    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + tolerance
 
 
 def synthetic_heap(angle_deg, seed, shape="cone", height=FLANK_HEIGHT):
@@ -72,7 +85,7 @@ def test_cone_angle_recovered_within_uncertainty(angle, seed):
     centroids, _ = synthetic_heap(angle, seed)
     result = angle_of_repose(centroids, D)
     assert result.plan == "round"
-    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + TOLERANCE_DEG
+    assert_recovered(result, angle, TOLERANCE_DEG)
     assert result.uncertainty_deg == pytest.approx(math.hypot(result.fit_stderr_deg, result.sector_std_deg))
     assert np.isfinite(result.sector_angles_deg).sum() >= 6
 
@@ -85,7 +98,7 @@ def test_square_pyramid_is_measured_along_its_faces(angle, seed):
     centroids, _ = synthetic_heap(angle, seed, shape="square")
     result = angle_of_repose(centroids, D, centre=CENTRE)
     assert result.plan == "square"
-    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + TOLERANCE_DEG
+    assert_recovered(result, angle, TOLERANCE_DEG)
     read_as_cone = angle_of_repose(centroids, D, centre=CENTRE, plan="round")
     assert read_as_cone.angle_deg < angle - 1.0
 
@@ -122,7 +135,7 @@ def test_low_mound_is_measured_above_the_floor_layer(shape, seed):
     result = angle_of_repose(centroids, D, centre=CENTRE)
     h = result.profile_h[result.used_mask]
     assert h.min() >= D and h.min() < 1.5 * D
-    assert abs(result.angle_deg - 12.0) <= result.uncertainty_deg + LOW_MOUND_TOLERANCE_DEG
+    assert_recovered(result, 12.0, LOW_MOUND_TOLERANCE_DEG, LOW_MOUND_UNCERTAINTY_CAP_DEG)
 
 
 def test_toe_stays_above_a_taller_floor_layer():
@@ -209,6 +222,7 @@ CHANNEL = 3 * D
 # uncertainty reported 1.6-4.4 deg, the largest miss beyond it 5.2 deg. At 4 grain sizes the
 # scatter is 2.4-6.7 deg (docs/repose.md).
 CHANNEL_TOLERANCE_DEG = 6.0
+CHANNEL_UNCERTAINTY_CAP_DEG = 5.0  # wedges and quarter heaps: fewer surface points
 
 
 def synthetic_wedge(angle_deg, seed, height=5 * D, crest=1.5 * D):
@@ -232,7 +246,7 @@ def test_wedge_in_a_channel_is_measured_from_the_back_wall(angle, seed):
     centroids, base = synthetic_wedge(angle, seed)
     result = angle_of_repose(centroids, D, centre=BACK, plan="channel", width=CHANNEL)
     assert result.plan == "channel"
-    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + CHANNEL_TOLERANCE_DEG
+    assert_recovered(result, angle, CHANNEL_TOLERANCE_DEG, CHANNEL_UNCERTAINTY_CAP_DEG)
     assert np.isfinite(result.sector_angles_deg).sum() == 2  # strips along the channel, 1.5 D each
     assert result.extent <= base + TOE_WIDTH
 
@@ -251,7 +265,7 @@ def test_quarter_heap_in_a_corner_is_measured_from_the_corner(angle, seed):
     result = angle_of_repose(centroids, D, centre=CENTRE, plan="corner")
     assert result.plan == "corner"
     # a quarter of the cone's surface points: the channel's allowance, not the full cone's
-    assert abs(result.angle_deg - angle) <= result.uncertainty_deg + CHANNEL_TOLERANCE_DEG
+    assert_recovered(result, angle, CHANNEL_TOLERANCE_DEG, CHANNEL_UNCERTAINTY_CAP_DEG)
     assert np.isfinite(result.sector_angles_deg).sum() == 2  # the quadrant in two, as wide as a full heap's eight
     assert result.extent <= base + TOE_WIDTH + D
 

@@ -198,7 +198,10 @@ def small_tilt(tmp_path_factory):
 
 def test_a_small_pack_avalanches_and_its_books_close_after(small_tilt):
     summary, out = small_tilt
-    assert 10.0 < summary["tilt_at_avalanche_deg"] < 40.0
+    # not before its grains' own friction angle atan(mu_s) (a detection that fired on the pack's
+    # settling or the tilt's start would), and within the tilt's range (32.8 deg measured: angular
+    # grains in a box 2 grains deep whose side walls have the grains' friction)
+    assert math.degrees(math.atan(0.2)) < summary["tilt_at_avalanche_deg"] < 40.0
     assert summary["settled"] and summary["energy_from"] == "avalanche"
     assert abs(summary["energy"]["balance_error"]) < 1e-2
     assert summary["fill_height_grains"] > 2
