@@ -22,7 +22,7 @@ def grain_like_system(n=3000, seed=0):
 @pytest.mark.parametrize("backend", ["pardiso", "scipy"])
 def test_sparse_solve_satisfies_the_system(monkeypatch, backend):
     if backend == "pardiso" and linear.pypardiso is None:
-        pytest.skip("pypardiso is not installed on this platform")
+        pytest.skip("pypardiso is not installed (the test extra installs it on x86-64 only)")
     monkeypatch.setenv("VEMDEM_LINEAR_SOLVER", backend)
     assert linear.sparse_backend() == backend
     K, b = grain_like_system()
@@ -34,7 +34,7 @@ def test_sparse_solve_satisfies_the_system(monkeypatch, backend):
 def test_singular_system_is_named(monkeypatch, backend):
     """A free rigid mode (a zero row and column): a clear error, never a silent answer."""
     if backend == "pardiso" and linear.pypardiso is None:
-        pytest.skip("pypardiso is not installed on this platform")
+        pytest.skip("pypardiso is not installed (the test extra installs it on x86-64 only)")
     monkeypatch.setenv("VEMDEM_LINEAR_SOLVER", backend)
     K, b = grain_like_system()
     K = K.tolil()
