@@ -110,6 +110,14 @@ CONFIG_CASES = [
     ("pile: missing initial state", PILE, setter("initial_state", "none/state.npz"), "none/state.npz"),
     ("pile: box of zero width", PILE, setter("pack.box.width", 0.0), "pack.box.width"),
     ("pile: threshold zero", PILE, setter("settle.kinetic_threshold", 0.0), "settle.kinetic_threshold"),
+    ("pile: settle min_time above max_time", PILE, setter("settle.min_time", 5.0), "settle.min_time"),
+    ("scenario not a string", DROP, setter("scenario", ["scene"]), "scenario"),
+    ("gravity of booleans", DROP, setter("gravity", [True, False, 0.0]), "gravity"),
+    # a NaN in a wall's motion once crashed the process (an out-of-bounds write in the plane pairs' kernel)
+    ("nan wall time", DROP, setter("walls.0.times", [0.0, float("nan")]), "walls[0].times"),
+    ("nan wall displacement", DROP, lambda c: (setter("walls.0.times", [0.0, 1.0])(c), setter(
+        "walls.0.displacements", [[0.0, 0.0, 0.0], [0.0, 0.0, float("nan")]])(c)), "walls[0].displacements"),
+    ("wall displacement of two numbers", DROP, setter("walls.0.displacements", [[0.0, 0.0]]), "walls[0].displacements"),
 ]
 
 
@@ -148,6 +156,9 @@ FILE_CASES = {
     "binary garbage grain file": ("grain.stl", bytes(range(256)) * 4, "grain.stl"),
     "unknown grain file extension": ("grain.xyz", b"1 2 3\n", "grain.xyz"),
     "open surface grain file": ("grain.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n", "grain.obj"),
+    # merged into one point by the duplicate-vertex rounding, before the polyhedron's own check
+    "nan vertex in a grain file": ("grain.obj", b"v 0 0 0\nv 1e-3 0 0\nv 0 1e-3 0\nv nan 0 1e-3\n"
+                                   b"f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", "non-finite coordinates"),
 }
 
 
@@ -163,6 +174,12 @@ WALL_CASES = {
     "unknown wall mesh extension": ("lid.xyz", b"1 2 3\n", "lid.xyz"),
     "empty wall mesh": ("lid.obj", b"", "lid.obj"),
     "wall mesh without faces": ("lid.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "lid.obj"),
+    # a NaN vertex once reduced the wall to a point, and the grains fell through it without a word
+    "nan vertex in a wall mesh": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 0.01\n"
+                                  b"v nan 0.01 0.01\nf 1 3 2\nf 1 4 3\n", "non-finite coordinates"),
+    # a lid above the grains whose normals face up, away from them: they once fell through it unseen
+    "wall mesh facing away": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 0.01\n"
+                              b"v -0.01 0.01 0.01\nf 1 2 3\nf 1 3 4\n", "flip = true"),
 }
 
 
@@ -230,6 +247,80 @@ def test_checkpoint_with_a_damaged_entry_is_one_line(tmp_path, cli, entry, conte
     np.savez(out / "checkpoint.npz", **entries)
     code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
     assert_one_line_error(code, err, "checkpoint.npz")
+
+
+def test_a_mesh_lid_facing_the_grains_is_accepted(tmp_path, cli):
+    """The placement check of mesh walls refuses a lid whose normals face away (WALL_CASES), not one
+    that faces the grains."""
+    (tmp_path / "lid.obj").write_bytes(b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 0.01\n"
+                                       b"v -0.01 0.01 0.01\nf 1 3 2\nf 1 4 3\n")  # fmt: skip
+    walls = [{"type": "plane", "name": "floor", "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]},
+             {"type": "mesh", "file": "lid.obj"}]  # fmt: skip
+    code, _, err = cli("run", good_drop(tmp_path, walls=walls), "--out", tmp_path / "out", "--quiet")
+    assert code == 0, err
+
+
+def _nan_at_first(a):
+    a = a.astype(float)
+    a.flat[0] = np.nan
+    return a
+
+
+# numbers no run writes: each once went on (a negative time ran 10,000 steps, a NaN velocity gave a
+# traceback, a NaN position corrupted the heap) after the outputs had been truncated to the checkpoint
+DAMAGED_NUMBERS = {
+    "nan position": ("x", _nan_at_first, "non-finite positions"),
+    "nan velocity": ("v", _nan_at_first, "non-finite positions"),
+    "positions of another scene": ("x", lambda a: a[:-3], "positions of shape"),
+    "nan time": ("t", lambda a: np.array(np.nan), "time nan"),
+    "negative time": ("t", lambda a: np.array(-1.0), "time -1.0"),
+    "time beyond the run": ("t", lambda a: np.array(10.0), "beyond this run's"),
+    "zero step": ("dt", lambda a: np.array(0.0), "step 0.0"),
+    "negative frame": ("frame", lambda a: np.array(-5), "frame -5"),
+    "nan energy books": ("dissipated", lambda a: np.array(np.nan), "energy books"),
+}
+
+
+@pytest.mark.parametrize("entry, change, needle", list(DAMAGED_NUMBERS.values()), ids=list(DAMAGED_NUMBERS))
+def test_checkpoint_with_impossible_numbers_is_one_line_and_keeps_the_outputs(tmp_path, cli, entry, change, needle):
+    path = good_drop(tmp_path)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--quiet")[0] == 0
+    (out / "summary.json").unlink()  # a run that stopped before its end
+    before = (out / "history.csv").read_bytes()
+    with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
+        entries = {k: d[k] for k in d.files}
+    entries[entry] = change(entries[entry])
+    np.savez(out / "checkpoint.npz", **entries)
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert_one_line_error(code, err, needle)
+    assert (out / "history.csv").read_bytes() == before
+
+
+def test_overwrite_keeps_the_earlier_results_when_the_new_config_fails(tmp_path, cli):
+    """A mistake the scenario finds (a missing grain file) once left the folder empty: --overwrite
+    had removed the earlier run's outputs before it."""
+    out = tmp_path / "out"
+    assert cli("run", good_drop(tmp_path), "--out", out, "--quiet")[0] == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    code, _, err = cli("run", good_drop(tmp_path, **{"grains.0.file": "nowhere.stl"}), "--out", out, "--quiet",
+                       "--overwrite")  # fmt: skip
+    assert code == 2 and "nowhere.stl" in err and "earlier results" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+    assert not (out / ".vemdem-replaced").exists()
+    # and a good run replaces them, leaving nothing aside
+    assert cli("run", good_drop(tmp_path, duration=2e-3), "--out", out, "--quiet", "--overwrite")[0] == 0
+    assert not (out / ".vemdem-replaced").exists()
+    assert (out / "history.csv").read_bytes() != before["history.csv"]
+
+
+@pytest.mark.parametrize("summary", ["[1, 2]", '{"wall_seconds": "abc", "simulated_time": 1.0}'])
+def test_status_of_a_damaged_summary_is_one_line(tmp_path, cli, summary):
+    out = tmp_path / "out"
+    assert cli("run", good_drop(tmp_path), "--out", out, "--quiet")[0] == 0
+    (out / "summary.json").write_text(summary)
+    code, _, err = cli("status", out)
+    assert_one_line_error(code, err, "damaged")
 
 
 def test_a_step_control_change_on_resume_is_one_warning_line(tmp_path, cli):

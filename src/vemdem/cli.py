@@ -120,18 +120,26 @@ def _version() -> str:
         return "unknown"
 
 
+# --overwrite moves the earlier run's outputs here first and removes them only once the new run is
+# under way: a config mistake that the scenario finds (a missing grain file) gives them back
+REPLACED = ".vemdem-replaced"
+
+
 def _prepare_out(out: Path, resume: bool, overwrite: bool) -> bool:
-    """Check --out (and clear it with --overwrite); True when this run creates the folder."""
+    """Check --out (and, with --overwrite, move the earlier run's outputs aside into REPLACED);
+    True when this run creates the folder."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out: {out} is a file, not a folder")
     used = [name for name in KNOWN_OUTPUTS if (out / name).exists()] if out.is_dir() else []
     if used and not (resume or overwrite):
         raise ConfigError(f"--out: {out} holds the results of another run ({', '.join(used[:3])}); "
                           "use --resume to continue it, --overwrite to replace it, or another folder")  # fmt: skip
-    if overwrite:
+    if overwrite and used:
+        aside = out / REPLACED
+        shutil.rmtree(aside, ignore_errors=True)
+        aside.mkdir()
         for name in used:
-            target = out / name
-            shutil.rmtree(target) if target.is_dir() else target.unlink()
+            (out / name).rename(aside / name)
     created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -146,6 +154,26 @@ def _prepare_out(out: Path, resume: bool, overwrite: bool) -> bool:
 def _remove_if_empty(out: Path, created: bool) -> None:
     if created and out.is_dir() and not any(out.iterdir()):
         out.rmdir()
+
+
+def _settle_replaced(out: Path, restore: bool) -> None:
+    """The earlier run's outputs that --overwrite moved aside: back in place where the new run
+    stopped on its input (whatever it wrote removed first), removed otherwise."""
+    aside = out / REPLACED
+    if not aside.is_dir():
+        return
+    if restore:
+        for name in KNOWN_OUTPUTS:
+            target = out / name
+            if target.is_dir():
+                shutil.rmtree(target)
+            elif target.exists():
+                target.unlink()
+        for item in aside.iterdir():
+            item.rename(out / item.name)
+        aside.rmdir()
+    else:
+        shutil.rmtree(aside, ignore_errors=True)
 
 
 def _kernels_compiled() -> bool:
@@ -182,19 +210,25 @@ def cmd_run(args) -> int:
         kwargs = {"resume": True} if args.resume else {}
         summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
     except (ConfigError, CheckpointError, InitialStateError) as exc:
+        _settle_replaced(args.out, restore=True)
         _remove_if_empty(args.out, created)
         print(f"vemdem: config error: {exc}", file=sys.stderr)
+        if args.overwrite:
+            print(f"vemdem: the earlier results in {args.out} are kept", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        _settle_replaced(args.out, restore=False)  # the new run has its checkpoint: it is the one to resume
         _remove_if_empty(args.out, created)
         print(f"\nvemdem: interrupted; continue from the last checkpoint with: vemdem run {args.config} --out {args.out} "
               "--resume", file=sys.stderr)  # fmt: skip
         return 130
-    except (ArithmeticError, RuntimeError, ValueError, OSError) as exc:
+    except (ArithmeticError, RuntimeError, ValueError, OSError, MemoryError) as exc:
+        _settle_replaced(args.out, restore=False)
         _remove_if_empty(args.out, created)
         print(f"vemdem: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         print(f"vemdem: results written so far are in {args.out}", file=sys.stderr)
         return 1
+    _settle_replaced(args.out, restore=False)
     if not args.quiet:
         print(f"{cfg['scenario']}: done in {summary['wall_seconds']:.1f} s; results in {args.out}")
     return 0
@@ -302,17 +336,20 @@ def _statuses_here(folder: Path) -> list[dict]:
 def cmd_status(args) -> int:
     try:
         found = _statuses(args.out)
+        if found:
+            text = json.dumps(found, indent=2) if args.json else "\n".join(_status_line(s) for s in found)
     except CheckpointError as exc:
         print(f"vemdem: status: {exc}", file=sys.stderr)
+        return 2
+    except (AttributeError, KeyError, TypeError, ValueError) as exc:  # a summary or checkpoint of the wrong shape
+        print(f"vemdem: status: {args.out}: a damaged summary.json or checkpoint.npz ({type(exc).__name__}: {exc})",
+              file=sys.stderr)  # fmt: skip
         return 2
     if not found:
         print(f"vemdem: status: {args.out} holds no run (no checkpoint.npz or summary.json, nor in its subfolders)",
               file=sys.stderr)  # fmt: skip
         return 2
-    if args.json:
-        print(json.dumps(found, indent=2))
-    else:
-        print("\n".join(_status_line(s) for s in found))
+    print(text)
     return 0
 
 

@@ -151,9 +151,35 @@ def warn_if_mass_scaling_shows(scene: Scene) -> None:
             f"scalings up to {neutral:.2g} are (docs/results.md, mass scaling)"), stacklevel=2)  # fmt: skip
 
 
-def check_placement(grains: list[Polyhedron], planes: list) -> None:
+def _behind_mesh(centroids: np.ndarray, wall, chunk: int = 64) -> np.ndarray:
+    """For each point, whether it lies behind the mesh wall: on the back side of the face whose plane
+    is nearest among the faces it projects inside of (points that project inside none: False). The
+    faces' normals face the grains (MeshWall), so a grain behind is misplaced or its file's normals
+    face away (`flip`)."""
+    v = wall.vertices_at(0.0)
+    a, b, c = (v[wall.faces[:, i]] for i in range(3))
+    e1, e2 = b - a, c - a
+    n = np.cross(e1, e2)
+    n2 = np.einsum("fi,fi->f", n, n)
+    out = np.zeros(len(centroids), bool)
+    for lo in range(0, len(centroids), chunk):  # points x faces at a time, not all at once
+        r = centroids[lo : lo + chunk, None, :] - a[None]
+        # barycentric coordinates of the projection onto each face's plane
+        u = np.einsum("pfi,fi->pf", np.cross(r, e2[None]), n) / n2
+        w = np.einsum("pfi,fi->pf", np.cross(e1[None], r), n) / n2
+        inside = (u >= 0) & (w >= 0) & (u + w <= 1)
+        signed = np.einsum("pfi,fi->pf", r, n) / np.sqrt(n2)
+        distance = np.where(inside, np.abs(signed), np.inf)
+        nearest = np.argmin(distance, axis=1)
+        rows = np.arange(len(nearest))
+        out[lo : lo + chunk] = np.isfinite(distance[rows, nearest]) & (signed[rows, nearest] < 0.0)
+    return out
+
+
+def check_placement(grains: list[Polyhedron], planes: list, meshes: list = ()) -> None:
     """Grains must start apart from each other and in front of every wall: an overlap has no
-    contact pair (the barrier acts across a positive gap) and would fail later, misleadingly."""
+    contact pair (the barrier acts across a positive gap) and would fail later, misleadingly. A grain
+    behind a mesh wall is named with the wall's name (its file)."""
     pair = first_overlap(grains)
     if pair is not None:
         a, b = pair
@@ -167,13 +193,22 @@ def check_placement(grains: list[Polyhedron], planes: list) -> None:
             if depth <= 0.0:
                 raise ConfigError(f"grains[{g}]: it starts {-depth:.3g} m behind walls[{k}] ({plane.name!r}); "
                                   "place it in front of the wall")  # fmt: skip
+    centroids = np.array([grain.vertices.mean(axis=0) for grain in grains])
+    for mesh in meshes:
+        if not mesh.motion.active(0.0) or not len(grains):
+            continue
+        behind = np.flatnonzero(_behind_mesh(centroids, mesh))
+        if len(behind):
+            raise ConfigError(f"grains[{int(behind[0])}]: it starts behind the mesh wall {mesh.name!r}: place it in "
+                              "front of the wall, or set flip = true on that wall if the file's normals face away "
+                              "from the grains")  # fmt: skip
 
 
 def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
     """The `scene` scenario's grains, walls and initial vertex velocities."""
     grains = [place_grain(g, base_dir) for g in cfg["grains"]]
     planes, meshes = build_walls(cfg["walls"], base_dir)
-    check_placement(grains, planes)
+    check_placement(grains, planes, meshes)
     scene = scene_from(grains, cfg, planes, meshes)
     v0 = np.vstack([np.tile(g["velocity"], (grain.n_vertices, 1)) for g, grain in zip(cfg["grains"], grains)])
     return scene, v0

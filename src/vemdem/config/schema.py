@@ -57,10 +57,22 @@ def poisson(v):
     return None if -1 < v < 0.5 else "must be in (-1, 0.5) (nu >= 0.5 is incompressible)"
 
 
+def _finite_number(c) -> bool:
+    # bool is an int to Python: `[true, false, 0]` is no vector
+    return isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+
+
 def vector3(v):
-    return None if len(v) == 3 and all(isinstance(c, (int, float)) and math.isfinite(c) for c in v) else (
-        "must be a list of 3 finite numbers"
-    )
+    return None if len(v) == 3 and all(_finite_number(c) for c in v) else "must be a list of 3 finite numbers"
+
+
+def finite_numbers(v):
+    return None if all(_finite_number(c) for c in v) else "must be a list of finite numbers"
+
+
+def vectors3(v):
+    ok = all(isinstance(d, list) and vector3(d) is None for d in v)
+    return None if ok else "must be a list of [x, y, z] lists of finite numbers"
 
 
 def _type_name(kind) -> str:

@@ -15,12 +15,14 @@ from .schema import (
     ConfigError,
     Field,
     TableList,
+    finite_numbers,
     non_negative,
     open_unit_interval,
     poisson,
     positive,
     unit_interval,
     vector3,
+    vectors3,
 )
 
 # -------------------------------------------------------------------------------- helpers
@@ -100,8 +102,8 @@ WALL = {
     "name": Field(str, "", doc="label in outputs"),
     "frictionless": Field(bool, False, doc="no friction on this wall's pairs (a mirror plane; docs/contact.md)"),
     "removed_at": Field(float, None, non_negative, "time at which the wall disappears (s)"),
-    "times": Field(list, [0.0], doc="times of the piecewise-linear displacement history (s)"),
-    "displacements": Field(list, [[0.0, 0.0, 0.0]], doc="rigid displacement at each time (m)"),
+    "times": Field(list, [0.0], finite_numbers, "times of the piecewise-linear displacement history (s)"),
+    "displacements": Field(list, [[0.0, 0.0, 0.0]], vectors3, "rigid displacement at each time (m)"),
 }
 
 CONTACT = {
@@ -415,10 +417,17 @@ def check_rules(cfg: dict) -> None:
     """Rules that tie several keys together; each raises a ConfigError naming the key."""
     contact = cfg.get("contact")
     if isinstance(contact, dict) and contact.get("mu_d") is not None and contact["mu_d"] > contact["mu_s"]:
-        raise ConfigError(f"contact.mu_d: must not exceed contact.mu_s ({contact['mu_s']:g}), got {contact['mu_d']:g}")
+        raise ConfigError(f"contact.mu_d: must not exceed contact.mu_s ({contact['mu_s']:g}), got {contact['mu_d']:g} "
+                          "(its default where not set: give both)")  # fmt: skip
     pack = cfg.get("pack")
     if isinstance(pack, dict) and "mu_d" in pack and pack["mu_d"] > pack["mu_s"]:
-        raise ConfigError(f"pack.mu_d: must not exceed pack.mu_s ({pack['mu_s']:g}), got {pack['mu_d']:g}")
+        raise ConfigError(f"pack.mu_d: must not exceed pack.mu_s ({pack['mu_s']:g}), got {pack['mu_d']:g} "
+                          "(its default where not set: give both)")  # fmt: skip
+    settle = cfg.get("settle")
+    if isinstance(settle, dict) and "min_time" in settle and "max_time" in settle:
+        if settle["min_time"] > settle["max_time"]:
+            raise ConfigError(f"settle.min_time: must not exceed settle.max_time ({settle['max_time']:g} s), "
+                              f"got {settle['min_time']:g}")  # fmt: skip
     solver = cfg.get("solver")
     if isinstance(solver, dict) and "dt_min" in solver and "dt_max" in solver:
         if solver["dt_min"] > solver["dt_max"]:

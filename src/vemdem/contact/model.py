@@ -117,7 +117,9 @@ def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar
         e11 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
         e22 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
         for v in range(n_vertices):
-            if signed[w, v] > gbar:
+            # the counting pass's own test, `not <=` rather than `>`: a NaN distance fails both, so the
+            # two passes agree and nothing is written past the `count` rows (heap corruption, seen)
+            if not signed[w, v] <= gbar:
                 continue
             ints[k, KIND] = VERTEX_FACE
             ints[k, GRAIN_A] = vertex_grain[v]

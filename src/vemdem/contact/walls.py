@@ -29,6 +29,8 @@ class Motion:
         d = np.asarray(self.displacements, float)
         if t.ndim != 1 or d.shape != (len(t), 3):
             raise ValueError("wall motion: need one 3-vector displacement per time")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(d))):
+            raise ValueError("wall motion: times and displacements must be finite numbers")
         if np.any(np.diff(t) <= 0):
             raise ValueError("wall motion: times must increase")
 

@@ -100,10 +100,35 @@ class Resumed:
     wall_seconds: float | None = None
 
 
-def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> Resumed:
+def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple | None) -> None:
+    """A checkpoint whose numbers cannot be a run's (damaged, or written for other grains): a
+    CheckpointError naming what, before the run truncates its outputs to the checkpoint's time."""
+    fault = None
+    if shape is not None and not (state.x.shape == state.v.shape == state.a.shape == tuple(shape)):
+        fault = f"positions of shape {state.x.shape}, where this scene's vertices are {tuple(shape)}"
+    elif not all(np.all(np.isfinite(f)) for f in (state.x, state.v, state.a)):
+        fault = "non-finite positions, velocities or accelerations"
+    elif not all(np.all(np.isfinite(b)) for b in state.bodies.values() if np.asarray(b).dtype.kind == "f"):
+        fault = f"non-finite body states ({', '.join(sorted(state.bodies))})"
+    elif not (np.isfinite(state.t) and state.t >= 0.0):
+        fault = f"time {state.t!r}"
+    elif not (np.isfinite(dt) and dt > 0.0):
+        fault = f"step {dt!r}"
+    elif frame < 0:
+        fault = f"frame {frame}"
+    elif not (np.isfinite(state.dissipated) and np.isfinite(state.power)):
+        fault = "non-finite energy books"
+    if fault:
+        raise CheckpointError(f"--resume: {path} holds {fault}: not a checkpoint of this run; "
+                              "remove it and run again without --resume")  # fmt: skip
+
+
+def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, shape: tuple | None = None) -> Resumed:
     """The run at a checkpoint, read in one pass; control.dt and easy_streak are restored in place.
-    Anything unreadable, from another config or of the wrong shape is a CheckpointError naming the file.
-    A config that differs only in identity.adjustable keys is accepted, with a ResumeChangeWarning."""
+    Anything unreadable, from another config or of the wrong shape (`shape`: the scene's vertex
+    array) or with numbers no run makes (non-finite, negative time) is a CheckpointError naming the
+    file. A config that differs only in identity.adjustable keys is accepted, with a
+    ResumeChangeWarning."""
     if not path.is_file():
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
@@ -117,6 +142,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity) -> 
             control.easy_streak = int(d["easy_streak"])
             resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d),
                               _wall_seconds(d))  # fmt: skip
+        _check_state(path, state, control.dt, resumed.frame, shape)
     except CheckpointError:
         raise
     except UNREADABLE_NPZ as exc:

@@ -56,6 +56,10 @@ def _triangles(mesh, path: Path) -> tuple[np.ndarray, np.ndarray]:
     points = np.asarray(mesh.points, float)[used]
     if points.shape[1] == 2:
         raise GeometryError(f"{path}: the surface is 2D; a grain needs 3D coordinates")
+    if not np.all(np.isfinite(points)):
+        # before merge_vertices, whose rounding would fold every non-finite point into one
+        bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0])
+        raise GeometryError(f"{path}: non-finite coordinates (vertex {int(used[bad])} of the file)")
     return points, remap[faces]
 
 

@@ -153,8 +153,9 @@ def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume
         state = load_state(path)
     except StateFileError as exc:
         raise ConfigError(str(exc)) from None
-    if "box" not in state.meta:
-        raise ConfigError(f"initial_state: {path} does not come from a pack run (no box recorded)")
+    missing = [key for key in ("box", "floor", "centre") if key not in state.meta]
+    if missing:
+        raise ConfigError(f"initial_state: {path} does not come from a pack run (no {', '.join(missing)} recorded)")
     if state.meta.get("mass_scaling", 1.0) != cfg["solver"]["mass_scaling"]:
         state = reequilibrated(state, cfg, Path(out_dir) / "reequilibrate", progress, resume)
     return state, path

@@ -36,6 +36,8 @@ EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EX
 
 
 def scenario_module(name):
+    if not isinstance(name, str):
+        raise ConfigError(f"scenario: must be a string, one of {', '.join(SCENARIOS)}; got {name!r}")
     if name not in SCENARIOS:
         raise ConfigError(f"scenario: unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
     return import_module(SCENARIOS[name])
