@@ -240,6 +240,20 @@ def test_bad_set_exits_2_before_running(tmp_path, cli, setting, problem):
     assert not out.exists()
 
 
+def test_sweep_out_that_is_a_file_or_another_sweep_exits_2(tmp_path, cli):
+    """A file as --out was a traceback, and a second sweep into a finished one's folder wrote over
+    its cases and table without a word."""
+    (tmp_path / "afile").write_text("")
+    code, _, err = cli("sweep", write_config(tmp_path), "--set", "material.E=1e6,2e6", "--out", tmp_path / "afile")
+    assert code == 2 and "is a file" in err and "Traceback" not in err
+    done = tmp_path / "done"
+    done.mkdir()
+    (done / "sweep.csv").write_text("case\n")
+    code, _, err = cli("sweep", write_config(tmp_path), "--set", "material.E=1e6,2e6", "--out", done)
+    assert code == 2 and "another sweep" in err
+    assert sorted(p.name for p in done.iterdir()) == ["sweep.csv"]
+
+
 # A 4-grain pile collapse of rigid grains (seconds): two seeds, two collapse frictions.
 PILE = """
 scenario = "pile_collapse"

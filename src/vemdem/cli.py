@@ -253,6 +253,13 @@ def cmd_sweep(args) -> int:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
     out = args.out.resolve()
+    if out.exists() and not out.is_dir():
+        print(f"vemdem: config error: --out: {out} is a file, not a folder", file=sys.stderr)
+        return 2
+    if (out / "sweep.csv").exists():  # its cases' folders would be written over one by one
+        print(f"vemdem: config error: --out: {out} holds the results of another sweep (sweep.csv); use another folder",
+              file=sys.stderr)  # fmt: skip
+        return 2
     sweep.write_case_configs(cases, out, args.config.resolve().parent)
     try:
         results = sweep.run_cases(cases, out, args.config.resolve().parent, args.scheduler, args.workers, args.quiet,

@@ -257,7 +257,7 @@ GRAIN_COMPRESSION = {
         "steps": Field(int, 30, positive, "load steps"),
     },
     "solver": {
-        "rtol": Field(float, 1e-9, positive, "Newton tolerance, relative"),
+        "rtol": Field(float, 1e-9, open_unit_interval, "Newton tolerance, relative"),
         "max_iterations": Field(int, 40, positive),
     },
     "output": {
