@@ -37,14 +37,15 @@ class InterfaceLaw:
 
     def __post_init__(self):
         checks = [
-            (self.activation_gap > 0, "activation_gap must be > 0"),
-            (self.penalty > 0, "penalty must be > 0"),
+            (np.isfinite(self.activation_gap) and self.activation_gap > 0, "activation_gap must be finite and > 0"),
+            (np.isfinite(self.penalty) and self.penalty > 0,
+             "penalty must be finite and > 0 (contact.reference_force sets it: give a finite force)"),
             (self.penalty_exponent >= 1, "penalty_exponent must be >= 1"),
             (0 < self.switch_factor < 1, "switch_factor must be in (0, 1)"),
             (self.barrier_exponent < -1, "barrier_exponent must be < -1 (the potential must blow up at contact)"),
         ]
         for ok, message in checks:
-            if not (ok and np.isfinite([self.activation_gap, self.penalty]).all()):
+            if not ok:  # each its own test: the first message names the value that is wrong
                 raise ValueError(f"contact law: {message}")
 
     @property
