@@ -97,6 +97,7 @@ CONFIG_CASES = [
     ("too few vertices", DROP, setter("grains.0.vertices", 3), "grains[0].vertices"),
     ("negative size", DROP, setter("grains.0.size", -1e-3), "grains[0].size"),
     ("missing grain file", DROP, setter("grains.0.file", "nowhere.stl"), "nowhere.stl"),
+    ("file shape without a file", DROP, setter("grains.1.shape", "file"), "grains[1].file"),
     ("overlapping grains", DROP, setter("grains.1.position", [0.0, 0.0, 1.3e-3]), "grains[0] and grains[1]"),
     ("grain behind the floor", DROP, setter("grains.0.position", [0.0, 0.0, 0.1e-3]), "grains[0]"),
     ("unknown wall type", DROP, setter("walls.0.type", "sphere"), "walls[0].type"),

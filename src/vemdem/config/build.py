@@ -48,13 +48,14 @@ def solver_options_from(cfg: dict) -> SolverOptions:
 
 
 # ---------------------------------------------------------------------------- grains
-def make_grain(spec: dict, base_dir=None, truncate: bool = False) -> Polyhedron:
-    """A grain from a checked grain table (`shape` or `file`); geometry errors become ConfigErrors."""
+def make_grain(spec: dict, base_dir=None, truncate: bool = False, where: str = "grain") -> Polyhedron:
+    """A grain from a checked grain table (`shape` or `file`); geometry errors become ConfigErrors
+    naming the table (`where`: "grain", or "grains[k]" in a scene)."""
     shape = "file" if spec.get("file") else spec["shape"]
     try:
         if shape == "file":
             if not spec.get("file"):
-                raise ConfigError("grain.file: required when shape = 'file'")
+                raise ConfigError(f"{where}.file: required when shape = 'file'")
             return load_surface(resolve_path(spec["file"], base_dir))
         if shape == "cube":
             return cube(spec["size"])
@@ -67,11 +68,11 @@ def make_grain(spec: dict, base_dir=None, truncate: bool = False) -> Polyhedron:
                           flatness=spec["flatness"], roughness=spec["roughness"], seed=spec["seed"],
                           truncate=spec["truncate"] if truncate else None)  # fmt: skip
     except GeometryError as exc:
-        raise ConfigError(f"grain: {exc}") from None
+        raise ConfigError(f"{where}: {exc}") from None
 
 
-def place_grain(spec: dict, base_dir=None) -> Polyhedron:
-    grain = make_grain(spec, base_dir)
+def place_grain(spec: dict, base_dir=None, where: str = "grain") -> Polyhedron:
+    grain = make_grain(spec, base_dir, where=where)
     grain = grain.translated(-grain.centroid).rotated(rotation_matrix(spec["rotation"]))
     return grain.translated(spec["position"])
 
@@ -206,7 +207,7 @@ def check_placement(grains: list[Polyhedron], planes: list, meshes: list = ()) -
 
 def build_scene(cfg: dict, base_dir=None) -> tuple[Scene, np.ndarray]:
     """The `scene` scenario's grains, walls and initial vertex velocities."""
-    grains = [place_grain(g, base_dir) for g in cfg["grains"]]
+    grains = [place_grain(g, base_dir, f"grains[{k}]") for k, g in enumerate(cfg["grains"])]
     planes, meshes = build_walls(cfg["walls"], base_dir)
     check_placement(grains, planes, meshes)
     scene = scene_from(grains, cfg, planes, meshes)
