@@ -96,8 +96,11 @@ CONFIG_CASES = [
     ("unknown shape", DROP, setter("grains.0.shape", "sphere"), "grains[0].shape"),
     ("too few vertices", DROP, setter("grains.0.vertices", 3), "grains[0].vertices"),
     ("negative size", DROP, setter("grains.0.size", -1e-3), "grains[0].size"),
-    ("missing grain file", DROP, setter("grains.0.file", "nowhere.stl"), "nowhere.stl"),
+    ("missing grain file", DROP, lambda c: (setter("grains.0.shape", "file")(c), setter("grains.0.file", "nowhere.stl")(c)),
+     "nowhere.stl: grain file not found"),
     ("file shape without a file", DROP, setter("grains.1.shape", "file"), "grains[1].file"),
+    # the file once won without a word
+    ("random shape and a file", DROP, setter("grains.0.file", "grain.stl"), "grains[0].shape"),
     ("overlapping grains", DROP, setter("grains.1.position", [0.0, 0.0, 1.3e-3]), "grains[0] and grains[1]"),
     ("grain behind the floor", DROP, setter("grains.0.position", [0.0, 0.0, 0.1e-3]), "grains[0]"),
     ("unknown wall type", DROP, setter("walls.0.type", "sphere"), "walls[0].type"),
@@ -171,7 +174,7 @@ FILE_CASES = {
 @pytest.mark.parametrize("name,content,needle", list(FILE_CASES.values()), ids=list(FILE_CASES))
 def test_bad_grain_file_is_one_line_naming_it(tmp_path, cli, name, content, needle):
     (tmp_path / name).write_bytes(content)
-    path = good_drop(tmp_path, **{"grains.0.file": name})
+    path = good_drop(tmp_path, **{"grains.0.shape": "file", "grains.0.file": name})
     code, _, err = cli("run", path, "--out", tmp_path / "out", "--quiet")
     assert_one_line_error(code, err, needle)
 
@@ -309,9 +312,10 @@ def test_overwrite_keeps_the_earlier_results_when_the_new_config_fails(tmp_path,
     out = tmp_path / "out"
     assert cli("run", good_drop(tmp_path), "--out", out, "--quiet")[0] == 0
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
-    code, _, err = cli("run", good_drop(tmp_path, **{"grains.0.file": "nowhere.stl"}), "--out", out, "--quiet",
+    missing = good_drop(tmp_path, **{"grains.0.shape": "file", "grains.0.file": "nowhere.stl"})
+    code, _, err = cli("run", missing, "--out", out, "--quiet",
                        "--overwrite")  # fmt: skip
-    assert code == 2 and "nowhere.stl" in err and "earlier results" in err
+    assert code == 2 and "nowhere.stl: grain file not found" in err and "earlier results" in err
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     assert not (out / ".vemdem-replaced").exists()
     # and a good run replaces them, leaving nothing aside

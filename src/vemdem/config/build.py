@@ -51,6 +51,9 @@ def solver_options_from(cfg: dict) -> SolverOptions:
 def make_grain(spec: dict, base_dir=None, truncate: bool = False, where: str = "grain") -> Polyhedron:
     """A grain from a checked grain table (`shape` or `file`); geometry errors become ConfigErrors
     naming the table (`where`: "grain", or "grains[k]" in a scene)."""
+    if spec.get("file") and spec["shape"] not in ("file", "cube"):  # "cube" is the default: not a choice
+        raise ConfigError(f"{where}.shape: {spec['shape']!r} and a file ({spec['file']}) are given; a grain is one "
+                          "or the other (shape = 'file' reads the file)")  # fmt: skip
     shape = "file" if spec.get("file") else spec["shape"]
     try:
         if shape == "file":
