@@ -13,6 +13,7 @@ from vemdem.scenarios.registry import example_text
 DROP = tomllib.loads(example_text("drop"))
 PILE = tomllib.loads(example_text("pile"))
 COMPRESSION = tomllib.loads(example_text("grain_compression"))
+LID = tomllib.loads(example_text("paper-compression"))
 
 
 def dump(value) -> str:
@@ -127,6 +128,7 @@ CONFIG_CASES = [
     ("infinite reference force", DROP, setter("contact.reference_force", 1e300), "reference_force"),
     # a Newton tolerance of 1 or more accepted the first iterate: forces 5 % off at 18 % strain, silently
     ("compression: rtol of 1e30", COMPRESSION, setter("solver.rtol", 1e30), "solver.rtol"),
+    ("lid: a billion frames", LID, setter("lid.frames", 10**9), "lid.frames"),
 ]
 
 

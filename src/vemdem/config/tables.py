@@ -34,6 +34,11 @@ BODY_MODELS = ("flexible",)
 MAX_FRAMES = 100_000  # more frames than this is a typo in output.every, not a wish
 
 
+def _lid_frames(v):
+    """lid.frames: per phase, so the two phases together within MAX_FRAMES."""
+    return positive(v) or (None if 2 * v <= MAX_FRAMES else f"must be at most {MAX_FRAMES // 2:,} per phase")
+
+
 def with_defaults(schema: dict, **defaults) -> dict:
     """A copy of a schema table with other default values (the keys stay those of `schema`)."""
     out = dict(schema)
@@ -400,7 +405,7 @@ LID_COMPRESSION = {
         "start": Field(float, 7e-3, positive, "lid height above the floor at the start and the end (m)"),
         "end": Field(float, 4.9e-3, positive, "lowest lid height (m)"),
         "speed": Field(float, 0.02, positive, "lid speed (m/s): slow against the grains' settling speed"),
-        "frames": Field(int, 100, positive, "frames (force samples) per phase"),
+        "frames": Field(int, 100, _lid_frames, "frames (force samples) per phase"),
     },
     **granular_tables(mu_s=0.15, mu_d=0.15, every=1e-3),
 }
