@@ -167,8 +167,8 @@ def _settle_replaced(out: Path, restore: bool) -> None:
             target = out / name
             if target.is_dir():
                 shutil.rmtree(target)
-            elif target.exists():
-                target.unlink()
+            else:
+                target.unlink(missing_ok=True)
         for item in aside.iterdir():
             item.rename(out / item.name)
         aside.rmdir()

@@ -100,9 +100,10 @@ class Resumed:
     wall_seconds: float | None = None
 
 
-def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple | None) -> None:
-    """A checkpoint whose numbers cannot be a run's (damaged, or written for other grains): a
-    CheckpointError naming what, before the run truncates its outputs to the checkpoint's time."""
+def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple | None, end: tuple | None) -> None:
+    """A checkpoint whose numbers cannot be a run's (damaged, or written for other grains or a
+    shorter run: `end` = (frames, duration)): a CheckpointError naming what, before the run
+    truncates its outputs to the checkpoint's time."""
     fault = None
     if shape is not None and not (state.x.shape == state.v.shape == state.a.shape == tuple(shape)):
         fault = f"positions of shape {state.x.shape}, where this scene's vertices are {tuple(shape)}"
@@ -118,16 +119,19 @@ def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple |
         fault = f"frame {frame}"
     elif not (np.isfinite(state.dissipated) and np.isfinite(state.power)):
         fault = "non-finite energy books"
+    elif end is not None and (frame > end[0] or state.t > end[1] * (1 + 1e-9)):
+        fault = f"frame {frame}, t = {state.t:.6g} s, beyond this run's {end[0]} frames and {end[1]:g} s"
     if fault:
         raise CheckpointError(f"--resume: {path} holds {fault}: not a checkpoint of this run; "
                               "remove it and run again without --resume")  # fmt: skip
 
 
-def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, shape: tuple | None = None) -> Resumed:
+def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, shape: tuple | None = None,
+                    end: tuple | None = None) -> Resumed:  # fmt: skip
     """The run at a checkpoint, read in one pass; control.dt and easy_streak are restored in place.
     Anything unreadable, from another config or of the wrong shape (`shape`: the scene's vertex
-    array) or with numbers no run makes (non-finite, negative time) is a CheckpointError naming the
-    file. A config that differs only in identity.adjustable keys is accepted, with a
+    array) or with numbers no run makes (non-finite, negative time, past `end` = (frames, duration))
+    is a CheckpointError naming the file. A config that differs only in identity.adjustable keys is accepted, with a
     ResumeChangeWarning."""
     if not path.is_file():
         raise CheckpointError(f"--resume: no checkpoint at {path}")
@@ -142,7 +146,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, sha
             control.easy_streak = int(d["easy_streak"])
             resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d),
                               _wall_seconds(d))  # fmt: skip
-        _check_state(path, state, control.dt, resumed.frame, shape)
+        _check_state(path, state, control.dt, resumed.frame, shape, end)
     except CheckpointError:
         raise
     except UNREADABLE_NPZ as exc:
