@@ -9,8 +9,8 @@ right-preconditioned GMRES iterations to a relative residual 1e-8, one cycle of 
 
     shipped     the grain-block solver itself (6 rigid modes per grain, multiplicative)
     block LU    the exact inverse of the grain blocks alone, no coarse space
-    rigid 6     the same multiplicative two-level form, written here with SciPy (checks the harness:
-                it must count what `shipped` counts)
+    rigid 6     the same multiplicative two-level form with the solver's own rigid modes, written
+                here with SciPy (checks the harness: it must count what `shipped` counts)
     affine 12   translations and the 9 linear modes e_k (x - c)_j / s of every grain: each grain's
                 homogeneous deformations too, the modes of its VEM consistency term
 
@@ -33,6 +33,7 @@ import bench_newton as bn
 from vemdem.solver.explicit import FEATURE_SKIN_GAPS
 from vemdem.solver.linear import make_linear_solver
 from vemdem.solver.linear.grain_block import _arnoldi
+from vemdem.solver.linear.modes import rigid_modes
 from vemdem.solver.newmark import newton_system
 
 HERE = Path(__file__).resolve().parent
@@ -40,33 +41,27 @@ RTOL, BUDGET = 1e-8, 200
 
 
 def coarse_modes(x: np.ndarray, vertex_ptr: np.ndarray, affine: bool) -> sp.csr_matrix:
-    """Z (3N x m G): per grain g, columns m g .. m g + m - 1: the translations, then either the
-    rotations e_k x r or the nine linear modes e_k r_j, r = (x - c_g) / s_g (c_g the vertex
-    average, s_g the RMS radius)."""
-    m = 12 if affine else 6
+    """Z (3N x m G): per grain g, columns m g .. m g + m - 1: the solver's own six rigid modes
+    (solver.linear.modes.rigid_modes: translations, rotations e_k x r), or the translations and the
+    nine linear modes e_k r_j, r = (x - c_g) / s_g (c_g the vertex average, s_g the RMS radius, as there)."""
     grain = np.repeat(np.arange(len(vertex_ptr) - 1), np.diff(vertex_ptr))
-    counts = np.diff(vertex_ptr)[:, None]
-    c = np.add.reduceat(x, vertex_ptr[:-1]) / counts
-    s = np.sqrt(np.add.reduceat(((x - c[grain]) ** 2).sum(1), vertex_ptr[:-1]) / counts[:, 0])
-    r = (x - c[grain]) / s[grain, None]
-    rows, cols, vals = [], [], []
-
-    def put(k, mode, value):  # dof k of every vertex, mode column `mode` of its grain
-        rows.append(3 * np.arange(len(x)) + k)
-        cols.append(m * grain + mode)
-        vals.append(value)
-
-    for k in range(3):
-        put(k, k, np.ones(len(x)))
-        if affine:
-            for j in range(3):
-                put(k, 3 + 3 * k + j, r[:, j])
-    if not affine:  # e_m x r
-        put(1, 3, r[:, 2]), put(2, 3, -r[:, 1])
-        put(0, 4, -r[:, 2]), put(2, 4, r[:, 0])
-        put(0, 5, r[:, 1]), put(1, 5, -r[:, 0])
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(3 * len(x), m * (len(vertex_ptr) - 1)))  # fmt: skip
+    if affine:
+        counts = np.diff(vertex_ptr)[:, None]
+        c = np.add.reduceat(x, vertex_ptr[:-1]) / counts
+        s = np.sqrt(np.add.reduceat(((x - c[grain]) ** 2).sum(1), vertex_ptr[:-1]) / counts[:, 0])
+        r = (x - c[grain]) / s[grain, None]
+        rows = np.zeros((len(x), 3, 12))  # vertex, dof k, mode
+        for k in range(3):
+            rows[:, k, k] = 1.0
+            rows[:, k, 3 + 3 * k : 6 + 3 * k] = r
+        rows = rows.reshape(3 * len(x), 12)
+    else:
+        rows = rigid_modes(x, vertex_ptr)
+    m = rows.shape[1]
+    dof_grain = np.repeat(grain, 3)
+    cols = m * dof_grain[:, None] + np.arange(m)[None, :]
+    dofs = np.repeat(np.arange(3 * len(x)), m)
+    return sp.csr_matrix((rows.ravel(), (dofs, cols.ravel())), shape=(3 * len(x), m * (len(vertex_ptr) - 1)))
 
 
 def gmres_iterations(K, precondition, b) -> tuple[int, float]:
