@@ -54,6 +54,7 @@ PROGRESS_FILE = "progress.txt"  # a running case's last progress line, shown by 
 
 @dataclass(frozen=True)
 class Case:
+    """One case of a sweep: its folder name, the swept values and its full config."""
     name: str  # folder name under the sweep's output folder
     params: dict[str, Scalar]  # swept key -> value, in the order the keys were given
     raw: dict  # the full config of this case, as `vemdem run` would read it
@@ -102,6 +103,7 @@ def parse_set(text: str) -> tuple[str, list[Scalar]]:
 
 
 def parse_sets(texts: list[str]) -> dict[str, list[Scalar]]:
+    """The `--set KEY=V1,V2,...` options as key -> values (a key given twice is an error)."""
     sweeps: dict[str, list[Scalar]] = {}
     for text in texts:
         key, values = parse_set(text)
@@ -155,6 +157,7 @@ def seed_key(base: dict) -> str:
 
 
 def with_values(base: dict, params: dict[str, Scalar]) -> dict:
+    """A copy of the config with the swept keys set (`seed` goes where the scenario keeps its seed)."""
     raw = copy.deepcopy(base)
     for key, value in params.items():
         if key == SEED:
@@ -249,6 +252,7 @@ PACK_FOLDER = "pack"  # where pile_collapse, lid_compression, ... keep their pac
 
 @dataclass(frozen=True)
 class SharedPack:
+    """A pack several cases settle the same way, settled once in the first case's folder."""
     folder: Path  # where it is settled: the pack folder of the first case that needs it
     config: dict  # the complete pack config (scenarios.pack.pack_config)
     cases: tuple[int, ...]  # the cases that start from it
@@ -411,10 +415,12 @@ def run_cases(
 
 
 def summary_columns(results: list[dict], taken: set[str]) -> list[str]:
+    """The summary fields of the results, beyond the `taken` columns, sorted."""
     return sorted({key for result in results for key in result} - taken)
 
 
 def seeded(cases: list[Case]) -> bool:
+    """Whether the sweep repeats its cases over seeds (`--set seed=...`)."""
     return bool(cases) and SEED in cases[0].params
 
 

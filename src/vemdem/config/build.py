@@ -29,16 +29,19 @@ def resolve_path(name: str, base_dir) -> Path:
 
 
 def material_from(cfg: dict, mass_scaling: float = 1.0) -> Material:
+    """The `[material]` table as a Material, its density multiplied by the mass scaling."""
     m = cfg["material"]
     return Material(m["E"], m["nu"], m["density"] * mass_scaling)
 
 
 def vem_options_from(cfg: dict) -> VemOptions:
+    """The `[vem]` table as VemOptions."""
     v = cfg["vem"]
     return VemOptions(v["beta_internal"], v["beta_mass"], v["beta_load"], v["submesh"])
 
 
 def solver_options_from(cfg: dict) -> SolverOptions:
+    """The `[solver]` table as SolverOptions."""
     s = cfg["solver"]
     keys = ("integrator", "beta", "gamma", "dt", "dt_min", "dt_max", "max_iterations", "easy_iterations",
             "grow_after", "freeze_cycles", "break_stick_cycles", "hold_damping_cycles", "rotated_tangent",
@@ -75,6 +78,7 @@ def make_grain(spec: dict, base_dir=None, truncate: bool = False, where: str = "
 
 
 def place_grain(spec: dict, base_dir=None, where: str = "grain") -> Polyhedron:
+    """A `[[grains]]` table's grain, rotated about its centroid and moved to its position."""
     grain = make_grain(spec, base_dir, where=where)
     grain = grain.translated(-grain.centroid).rotated(rotation_matrix(spec["rotation"]))
     return grain.translated(spec["position"])
@@ -90,6 +94,7 @@ def _motion(spec: dict, where: str) -> Motion:
 
 
 def build_walls(specs: list, base_dir=None):
+    """The `[[walls]]` tables as plane and mesh walls with their prescribed motion: (planes, meshes)."""
     planes, meshes = [], []
     for i, spec in enumerate(specs):
         where = f"walls[{i}]"
@@ -146,6 +151,7 @@ NEUTRAL_RATIO = 0.25
 
 
 def warn_if_mass_scaling_shows(scene: Scene) -> None:
+    """Warn in one line when the mass scaling makes collisions rebound more than real grains do."""
     ratio = scene.vibration_contact_ratio()
     if ratio > NEUTRAL_RATIO:
         neutral = scene.mass_scaling * (NEUTRAL_RATIO / ratio) ** 2

@@ -23,6 +23,7 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True)
 class Field:
+    """One config key: its type (or the tuple of allowed strings), default, check and meaning."""
     kind: type | tuple  # float, int, str, bool, list, or a tuple of allowed str values
     default: Any = REQUIRED
     check: Callable[[Any], str | None] | None = None  # returns a problem or None
@@ -38,22 +39,27 @@ class TableList:
 
 
 def positive(v):
+    """Check: the value is > 0."""
     return None if v > 0 else "must be > 0"
 
 
 def non_negative(v):
+    """Check: the value is >= 0."""
     return None if v >= 0 else "must be >= 0"
 
 
 def unit_interval(v):
+    """Check: the value is in [0, 1]."""
     return None if 0 <= v <= 1 else "must be in [0, 1]"
 
 
 def open_unit_interval(v):
+    """Check: the value is in (0, 1)."""
     return None if 0 < v < 1 else "must be in (0, 1)"
 
 
 def poisson(v):
+    """Check: a Poisson's ratio in (-1, 0.5)."""
     return None if -1 < v < 0.5 else "must be in (-1, 0.5) (nu >= 0.5 is incompressible)"
 
 
@@ -63,14 +69,17 @@ def _finite_number(c) -> bool:
 
 
 def vector3(v):
+    """Check: a list of 3 finite numbers."""
     return None if len(v) == 3 and all(_finite_number(c) for c in v) else "must be a list of 3 finite numbers"
 
 
 def finite_numbers(v):
+    """Check: a list of finite numbers."""
     return None if all(_finite_number(c) for c in v) else "must be a list of finite numbers"
 
 
 def vectors3(v):
+    """Check: a list of [x, y, z] lists of finite numbers."""
     ok = all(isinstance(d, list) and vector3(d) is None for d in v)
     return None if ok else "must be a list of [x, y, z] lists of finite numbers"
 
@@ -165,6 +174,7 @@ def digest(obj) -> str:
 
 
 def load_toml(path: str | Path) -> dict:
+    """Read a TOML config file; a missing, unreadable or invalid file is a ConfigError naming it."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")

@@ -29,6 +29,7 @@ FORMAT = "vemdem-state-1"
 
 @dataclass
 class GranularState:
+    """A settled pack as a state file holds it: reference shapes, positions, velocities, metadata, friction."""
     grains: list[Polyhedron]  # stress-free reference shapes, in the frame they were built in
     x: np.ndarray  # (N, 3) current vertex positions, grains in order
     v: np.ndarray  # (N, 3) velocities
@@ -45,11 +46,13 @@ def friction_arrays(history) -> dict:
 
 
 class StateFileError(ValueError):
+    """A state file that is missing, of another format or damaged; str(e) names the file."""
     pass
 
 
 def save_state(path: Path, grains: list[Polyhedron], x: np.ndarray, v: np.ndarray, meta: dict,
                friction: dict | None = None) -> None:  # fmt: skip
+    """Write a granular state to `path` (npz, atomically), for another scenario to start from."""
     extra = {f"friction_{k}": friction[k] for k in FRICTION_FIELDS} if friction is not None else {}
     n_v = np.array([g.n_vertices for g in grains])
     n_f = np.array([len(g.faces) for g in grains])
@@ -61,6 +64,7 @@ def save_state(path: Path, grains: list[Polyhedron], x: np.ndarray, v: np.ndarra
 
 
 def load_state(path: Path) -> GranularState:
+    """Read a state written by `save_state` (a `pack` run's `state.npz`), checking its format and arrays."""
     path = Path(path)
     if not path.is_file():
         raise StateFileError(f"initial_state: no state file at {path} (run a `pack` scenario first)")

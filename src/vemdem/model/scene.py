@@ -24,6 +24,7 @@ from .rigid import RigidBodies
 
 @dataclass
 class Scene:
+    """Grains in the world: reference shapes, material, body model, contact layer, gravity (`Scene.build` makes one)."""
     grains: list[Polyhedron]  # reference shapes (state files, outputs)
     material: Material  # density already multiplied by mass_scaling
     bodies: BodyModel

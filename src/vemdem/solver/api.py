@@ -66,6 +66,7 @@ class SolverOptions:
 
 
 class Integrator(Protocol):
+    """What the time loop asks of an integrator: an initial state, `advance` to a time, its step control."""
     name: str
     lumped: bool  # energies with the lumped mass (the explicit integrator's own)
     control: StepControl
@@ -194,6 +195,7 @@ def _control(o: SolverOptions) -> StepControl:
 
 
 def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
+    """The integrator for these options and this scene's body model (flexible or rigid grains, implicit or explicit)."""
     if scene.bodies.kind == "rigid":
         return RigidCentral(scene, options) if options.integrator == "explicit" else RigidImplicit(scene, options)
     if options.integrator == "explicit":
@@ -202,4 +204,5 @@ def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
 
 
 def kinetic_energy(scene: Scene, integrator: Integrator, v: np.ndarray) -> float:
+    """The grains' kinetic energy with the integrator's own mass (lumped for the explicit one)."""
     return scene.kinetic_energy(v, integrator.lumped)

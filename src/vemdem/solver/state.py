@@ -24,6 +24,7 @@ class TimeStepTooSmall(RuntimeError):
 
 @dataclass
 class State:
+    """The whole dynamic state of a run at time `t`: positions, velocities, friction history, energy books."""
     t: float
     x: np.ndarray  # body coordinates (flexible grains: vertex positions, (N, 3))
     v: np.ndarray
@@ -42,6 +43,7 @@ class State:
 
 @dataclass
 class StepInfo:
+    """What an accepted step reports: Newton iterations, contacts, energies and the walls' reactions."""
     iterations: int
     n_contacts: int
     contact_energy: float
@@ -79,6 +81,7 @@ class StepControl:
 
 @dataclass
 class RunStats:
+    """The counters every summary reports: steps accepted and rejected (by cause), Newton and Krylov iterations."""
     accepted: int = 0
     rejected: int = 0
     newton_iterations: int = 0

@@ -35,6 +35,7 @@ class InvertedElementError(FloatingPointError):
 
 @dataclass(frozen=True)
 class VemOptions:
+    """The `[vem]` table, typed: the blending betas of paper eq. 8 and the stabilisation sub-mesh method."""
     beta_internal: float = 0.5  # beta_i of eq. 8
     beta_mass: float = 1.0  # beta_d
     beta_load: float = 1.0  # beta_e
@@ -402,6 +403,7 @@ def _condense_tangent(Ka, T, nv, nk, out):
 
 @dataclass
 class Evaluation:
+    """The element kernel's result for every grain: strain energies, internal forces and tangent blocks."""
     energy: np.ndarray  # (G,) strain energy of each grain
     force: np.ndarray | None  # (N, 3) internal force dW/dx
     blocks: np.ndarray | None  # flat dense tangent blocks (see GrainElements.block_ptr)

@@ -20,6 +20,7 @@ from numba import njit
 
 @dataclass(frozen=True)
 class Material:
+    """Compressible Neo-Hookean material: E (Pa), Poisson's ratio, density (kg/m^3, mass scaling applied)."""
     E: float
     nu: float
     density: float
