@@ -16,7 +16,8 @@ ALLOWED = {
     "contact": {"geometry"},
     "model": {"vem", "contact", "geometry"},
     "solver": {"model", "contact"},
-    "driver": {"solver", "model", "io", "contact.model", "portable"},
+    # analysis.microstructure: the frames' fabric.csv (plain arrays in, numbers out: it runs nothing)
+    "driver": {"solver", "model", "io", "contact.model", "portable", "analysis.microstructure"},
     "io": {"geometry", "contact.walls"},
     "analysis": {"io", "geometry"},
     "config": {"model", "vem", "contact", "geometry", "io", "solver.api"},

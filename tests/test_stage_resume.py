@@ -20,7 +20,7 @@ CONFIGS = {
                         "settle": {"kinetic_threshold": 1e-2},
                         "lid": {"start": 4.0e-3, "end": 3.2e-3, "speed": 0.08, "frames": 4}},
 }  # fmt: skip
-STAGE_FILES = ["history.csv", "grains.csv", "walls.csv"]
+STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
 
 
 def _run(raw, out, resume=False):

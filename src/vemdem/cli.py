@@ -34,6 +34,7 @@ from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_tex
 
 # what a run writes into --out: --overwrite removes these and nothing else
 KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "history.csv", "grains.csv", "walls.csv",
+                 "fabric.csv", "fabric_rose.png", "fabric_first.npz",
                  "grains.pvd", "grains", "grain.pvd", "grain", "state.npz", "pile.png", "pile_3d.png", "pack_3d.png",
                  "force_strain.csv", "force_strain.png", "fluctuations.csv", "fluctuations.png",
                  "heap.png", "heap_3d.png", "tilt.png", "tilt_3d.png", "tilt.json", "pack",

@@ -18,7 +18,15 @@ from numba import njit, prange
 
 from .fade import fade_conservative, fade_conservative_tangent, is_faded
 from .law import normal_force, normal_potential
-from .narrow import EDGE_EDGE, N_NODES, gap_derivatives_into, gap_gradient_into, pair_weights
+from .narrow import (
+    EDGE_EDGE,
+    N_NODES,
+    VERTEX_FACE,
+    gap_derivatives_into,
+    gap_gradient_into,
+    pair_weights,
+    pair_weights_into,
+)
 from .pairs import C0, C1, KIND, NODE0, PAIR_CHUNKS, chunk_range, pair_nodes
 
 
@@ -275,6 +283,56 @@ def pair_points(x, ints, floats):
 def contact_points(x, ints, floats):
     """Contact point on side B of every pair (m, 3) (pair_points)."""
     return np.ascontiguousarray(pair_points(x, ints, floats)[:, 1])
+
+
+@njit(cache=True)
+def _cross_of(x, i0, i1, j0, j1):
+    """(x[i1] - x[i0]) x (x[j1] - x[j0])."""
+    a0, a1, a2 = x[i1, 0] - x[i0, 0], x[i1, 1] - x[i0, 1], x[i1, 2] - x[i0, 2]
+    b0, b1, b2 = x[j1, 0] - x[j0, 0], x[j1, 1] - x[j0, 1], x[j1, 2] - x[j0, 2]
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def pair_normals(x, ints, floats):
+    """Unit normal of every pair (m, 3), from side B to side A: the direction of the normal force on
+    A (force_on_side_a: f_n g / |g|, g = p_A - p_B). Where the features give it without the gap
+    vector, it comes from them: a gap near the touching floor is a difference of nearly equal
+    positions, its direction round-off, while a face's normal or two edges' cross product is not.
+
+        vertex-face   the face's normal (t1 - t0) x (t2 - t0): the narrow phase keeps a vertex on the
+                      face's outer side only, so it points to A; a wall plane's too (its triangle is
+                      counter-clockwise seen from its normal's side)
+        edge-edge     (a1 - a0) x (b1 - b0), turned along g
+        vertex-edge,  g / |g|: nothing else fixes the direction (zero where g is)
+        vertex-vertex
+    """
+    m = len(ints)
+    out = np.zeros((m, 3))
+    w0 = np.empty(6)
+    D = np.empty((6, 2))
+    w = np.empty(6)
+    for c in range(m):
+        kind = ints[c, KIND]
+        pair_weights_into(kind, floats[c, C0], floats[c, C1], w0, D, w)
+        g0 = g1 = g2 = 0.0
+        for i in range(N_NODES[kind]):
+            node = ints[c, NODE0 + i]
+            g0 += w[i] * x[node, 0]
+            g1 += w[i] * x[node, 1]
+            g2 += w[i] * x[node, 2]
+        n0, n1, n2 = g0, g1, g2
+        if kind == VERTEX_FACE:
+            t0, t1, t2 = ints[c, NODE0 + 1], ints[c, NODE0 + 2], ints[c, NODE0 + 3]
+            n0, n1, n2 = _cross_of(x, t0, t1, t0, t2)
+        elif kind == EDGE_EDGE:
+            n0, n1, n2 = _cross_of(x, ints[c, NODE0], ints[c, NODE0 + 1], ints[c, NODE0 + 2], ints[c, NODE0 + 3])
+            if n0 * g0 + n1 * g1 + n2 * g2 < 0.0:
+                n0, n1, n2 = -n0, -n1, -n2
+        norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if norm > 0.0:
+            out[c, 0], out[c, 1], out[c, 2] = n0 / norm, n1 / norm, n2 / norm
+    return out
 
 
 @njit(cache=True)

@@ -28,6 +28,7 @@ from .forces import (
     force_on_side_a,
     gap_rates,
     local_tangent_matrix,
+    pair_normals,
     pair_points,
     scatter_local_forces,
     scatter_pair_tangents,
@@ -137,6 +138,20 @@ def _plane_records(x, n_vertices, node0, normals, body, face, vertex_grain, gbar
     return ints, floats, -1, -1
 
 
+@dataclass(frozen=True)
+class ContactRecords:
+    """The records of a ContactResult as plain arrays, one row per record (analysis.microstructure
+    takes these: it may not import contact/). Bodies: grains 0..n_grains-1, then the walls (mesh
+    walls, then planes, as in ContactModel.wall_names); a mesh wall may be either side."""
+
+    a: np.ndarray  # (m,) side A's body
+    b: np.ndarray  # (m,) side B's body
+    kind: np.ndarray  # (m,) 0..3, contact.narrow.PAIR_NAMES: vertex-face, edge-edge, vertex-edge, vertex-vertex
+    point: np.ndarray  # (m, 3) the contact point: midway between the two closest points
+    normal: np.ndarray  # (m, 3) unit normal from B to A (forces.pair_normals)
+    force: np.ndarray  # (m, 3) force on A from B (normal + damping + friction; B gets minus it)
+
+
 @dataclass
 class ContactResult:
     energy: float
@@ -176,6 +191,19 @@ class ContactResult:
     def points(self, x_all: np.ndarray) -> np.ndarray:
         """(m, 3) contact point of every pair on its side B (frames show them)."""
         return contact_points(x_all, self.ints, self.floats) if len(self.ints) else np.zeros((0, 3))
+
+    def records(self, x_all: np.ndarray) -> ContactRecords:
+        """The records as plain arrays (ContactRecords); x_all: the positions with the walls' nodes
+        (ContactModel.all_positions), as `points` takes them."""
+        ints, floats = self.ints, self.floats
+        if not len(ints):
+            empty = np.zeros(0, np.int64)
+            return ContactRecords(empty, empty, empty, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+        x_all = np.ascontiguousarray(x_all, dtype=float)
+        sides = pair_points(x_all, ints, floats)
+        return ContactRecords(ints[:, GRAIN_A].copy(), ints[:, GRAIN_B].copy(), ints[:, KIND].copy(),
+                              0.5 * (sides[:, 0] + sides[:, 1]), pair_normals(x_all, ints, floats),
+                              self.pair_force)  # fmt: skip
 
     def add_to_blocks(self, vertex_grain, vertex_ptr, block_ptr, blocks, touched=None) -> sp.csr_matrix:
         """Add the contact tangent's within-grain terms to the grains' dense blocks (in place) and
