@@ -1,4 +1,4 @@
-"""A grain at rest stays at rest (issue 14): on a plane tilted below its friction angle (and below
+"""A grain at rest stays at rest (docs/dynamics.md): on a plane tilted below its friction angle (and below
 its tipping angle) a grain moves less than 1e-4 grain sizes in 0.2 s, with both integrators and
 their defaults. Gravity is tilted instead of the plane (the same problem). The grain first settles
 for 0.02 s from half an activation gap above the plane; the drift is measured after that."""

@@ -1,5 +1,5 @@
 """benchmarks/bench_paper.py builds its runs from the examples: the mass-scaled ones by default, the
-real-density implicit ones with --implicit (issue 14: every 515-grain real-density run's wall time
+real-density implicit ones with --implicit (every 515-grain real-density run's wall time
 from a benchmark anyone can rerun)."""
 
 from __future__ import annotations

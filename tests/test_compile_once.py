@@ -1,4 +1,4 @@
-"""Every kernel compiles once per run (issue 15: a fresh install's first run is mostly compilation).
+"""Every kernel compiles once per run (a fresh install's first run is mostly compilation).
 
 Numba compiles a jitted callee once per distinct argument type, and two habits doubled that
 silently: an integer literal argument is typed by its value (Literal[int](3)), so each call site

@@ -1,5 +1,5 @@
-"""Coulomb friction with static and dynamic coefficients, damping, walls and history
-(issue 3 tests 3 and 6), driven through the scene-level ContactModel."""
+"""Coulomb friction with static and dynamic coefficients, damping, walls and history,
+driven through the scene-level ContactModel."""
 
 import numpy as np
 import pytest

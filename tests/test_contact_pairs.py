@@ -1,6 +1,5 @@
-"""Grain-grain contact pairs: the hierarchy on flat contacts (issue 3 test 4), action = reaction
-(test 5), residual and tangent against finite differences of the potential (test 3), broad phase
-against brute force (test 7)."""
+"""Grain-grain contact pairs: the hierarchy on flat contacts, action = reaction,
+residual and tangent against finite differences of the potential, broad phase against brute force."""
 
 import itertools
 from collections import Counter, namedtuple

@@ -181,7 +181,7 @@ def test_the_tolerance_follows_the_load_the_walls_carry_up_to_the_laws():
 def test_a_law_made_for_a_lid_judges_a_grain_without_one_by_its_weight():
     """A sand grain dropped from two activation gaps onto the floor, its contact law made for 1e5
     times its weight (`reference_force` for a lid that has not arrived): it must settle, not gain
-    energy. With the tolerance at the law's scale whatever the load (session 26) it bounced ever
+    energy. With the tolerance at the law's scale whatever the load (an earlier guard) it bounced ever
     higher, 1.3 mm in 0.1 s, having gained 140 times the energy it fell with; the 30-grain pack of a
     lid cycle with `reference_force = 100` N blew apart before the lid arrived (docs/dynamics.md)."""
     from vemdem.solver.newmark import _energy_of
@@ -197,8 +197,8 @@ def test_a_law_made_for_a_lid_judges_a_grain_without_one_by_its_weight():
     for k in range(2):
         state, _ = advance(scene, state, (k + 1) * 0.01, control, NewmarkParameters(), stats=RunStats())
         highest = max(highest, float(state.x[:, 2].min()))
-    assert highest < 3 * law.activation_gap  # measured 1.2e-5 m (1.2 gaps); session 26's code: 2.1e-4 m by 0.02 s
-    assert _energy_of(scene, state) - start < 0.1 * fall  # measured -1.9 falls; session 26's code: +26
+    assert highest < 3 * law.activation_gap  # measured 1.2e-5 m (1.2 gaps); that guard: 2.1e-4 m by 0.02 s
+    assert _energy_of(scene, state) - start < 0.1 * fall  # measured -1.9 falls; that guard: +26
 
 
 def test_a_grain_loaded_but_undeformed_keeps_the_search_local(monkeypatch):

@@ -1,4 +1,4 @@
-"""Dynamics verified against conservation laws and closed forms (issue 4, tests 1, 2, 3 and 5):
+"""Dynamics verified against conservation laws and closed forms:
 energy over bounces, Coulomb friction on an incline, a head-on impact, explicit vs implicit."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The explicit step honours the contact damping the grains really have (issue 17, defect 1).
+"""The explicit step honours the contact damping the grains really have (docs/dynamics.md).
 
 The normal damping c = 2 zeta sqrt(k m_eq) is scaled with the grains' masses, but the explicit
 integrator moves lumped vertex masses, 15-30 times lighter: on them the damping ratio is

@@ -1,4 +1,4 @@
-"""The state handed from one stage to the next (io/state.py) keeps the friction history (issue 17):
+"""The state handed from one stage to the next (io/state.py) keeps the friction history:
 a run continued from a saved state follows the uninterrupted run, and without the history it
 would not (every sticking contact restarts from zero elastic slip and the grain gives a little)."""
 

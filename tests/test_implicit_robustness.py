@@ -1,4 +1,4 @@
-"""The implicit integrator at the real density finishes the scenes that used to stop it (issue 14):
+"""The implicit integrator at the real density finishes the scenes that used to stop it (docs/dynamics.md):
 twelve random sand grains (18 vertices, 1.2 mm, mu 0.6/0.5, E = 90 GPa, rho = 2200 kg/m^3)
 dropped from a 2 x 2 x 3 grid into a 4.8 mm box, 0.03 s. Before the rigid update the run stopped
 at t = 0.0299 s with TimeStepTooSmall after 15 minutes. Checked: it ends at 0.03 s, no accepted
@@ -158,8 +158,8 @@ def test_wall_time_keeps_the_share_of_the_gap():
 
 @pytest.mark.parametrize("table, expected", [({}, "rigid"), ({"predictor": "rest"}, "rest")])
 def test_the_predictor_key_reaches_newton(table, expected):
-    """`[solver] predictor` (default "rigid" since session 11) is what the implicit integrator's Newton
-    starts from; "rest" reproduces the runs made before it. A name outside the list is refused."""
+    """`[solver] predictor` (default "rigid") is what the implicit integrator's Newton starts from;
+    "rest" starts from the step's start. A name outside the list is refused."""
     from vemdem.config.build import solver_options_from
     from vemdem.config.schema import ConfigError
     from vemdem.scenarios.registry import checked_config

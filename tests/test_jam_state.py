@@ -1,5 +1,5 @@
 """benchmarks/jam_state.py writes a lid run's state where `bench_newton.py --state` rebuilds the run's
-scene: the lid where it stood, the run's contact law and friction history (issue 14: the lid jam's
+scene: the lid where it stood, the run's contact law and friction history (the lid jam's
 Newton iteration measured by a benchmark anyone can rerun, from benchmarks/data/lid515_jam.npz)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The linear-solver room (issue 14): the grain-block GMRES and the direct solver against SciPy's
+"""The linear-solver room (docs/linear-solvers.md): the grain-block GMRES and the direct solver against SciPy's
 sparse LU and against each other, on random non-symmetric block systems and on real Newton systems
 of grains in contact with friction; the rigid modes of the coarse space against the element tangent."""
 

@@ -1,4 +1,4 @@
-"""Mass scaling and collisions (issue 17): the contact law scales with the weight, so a contact
+"""Mass scaling and collisions (docs/results.md): the contact law scales with the weight, so a contact
 lasts as long at every scaling while a grain's vibration period grows as sqrt(s). A head-on impact
 measures where that starts to matter, and the guard warns there."""
 

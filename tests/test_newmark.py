@@ -1,4 +1,4 @@
-"""Implicit Newmark stepping (issue 4, first part): exact free fall, resting on a floor, no tunnelling."""
+"""Implicit Newmark stepping: exact free fall, resting on a floor, no tunnelling."""
 
 import numpy as np
 import pytest
@@ -114,8 +114,8 @@ def test_the_dissipation_books_are_the_steps_own():
     dissipated exactly what its kinetic, strain and gravity energy lose. The books
     (newmark.step_dissipation) take h/2 (v_n + v_n+1) . ((1 - gamma) r_d,n + gamma r_d,n+1), the
     dissipative residual's work as the step applies it: the balance closes to Newton's tolerance
-    (measured 2e-7 of the dissipated energy). The trapezoid of the powers, the books before
-    session 35, missed by 3e-3: that excess the energy guard read as a gain (docs/dynamics.md)."""
+    (measured 2e-7 of the dissipated energy). The trapezoid of the powers, an earlier form of the
+    books, missed by 3e-3: that excess the energy guard read as a gain (docs/dynamics.md)."""
     from vemdem.solver.newmark import newmark_step, total_energy
 
     soft = Material(1e6, 0.3, 1000.0)

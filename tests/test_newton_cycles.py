@@ -152,7 +152,7 @@ def test_a_frozen_pair_left_out_for_its_twin_stays_frozen():
     """A frozen pair that neither of the last two iterates' records hold (a twin carried its spot, so
     contact.model._with_frozen left it out) stays frozen with its stored record for the rest of the
     step, as FrozenPairs promises: should the twin leave, the stored record carries the spot. It
-    used to be dropped from the frozen set two iterations later (session 17)."""
+    used to be dropped from the frozen set two iterations later."""
     steady, toggling = (0, 1, 2), (2, 3, 4)
     trail, frozen = [], None
     for rows in ([steady, toggling], [steady], [steady, toggling]):

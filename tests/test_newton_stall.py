@@ -23,7 +23,7 @@ from vemdem.solver.state import RunStats
 
 PACK = Path(__file__).parent / "data" / "pack30_mu015.npz"
 # Newton from the step's start, the state the rule was measured on: with the rigid predictor (the
-# default since session 11) the same creep takes 396 strict against 397 iterations, the rule
+# default) the same creep takes 396 strict against 397 iterations, the rule
 # still saving rejected steps (7 against 4, docs/dynamics.md)
 CONFIG = {"scenario": "lid_compression", "initial_state": str(PACK), "lid": {"start": 5e-3, "end": 4e-3},
           "solver": {"integrator": "implicit", "mass_scaling": 1.0, "dt_max": 1e-3, "predictor": "rest"}}  # fmt: skip
@@ -37,7 +37,7 @@ def creep(stall_rtol: float):
     scene = scene_from(s.grains, cfg, box_walls(*m["box"], m["floor"], tuple(m["centre"])))
     integrator = make_integrator(solver_options_from(cfg), scene)
     integrator.params.stall_rtol = stall_rtol
-    # the tolerance the rule was made for: at the default newton_xtol 1e-6 (session 32) the iteration
+    # the tolerance the rule was made for: at the default newton_xtol 1e-6 the iteration
     # ends above the cycling with or without the rule (375 iterations and 2 rejected steps either way)
     integrator.params.xtol = 1e-8
     f = s.friction

@@ -1,4 +1,4 @@
-"""The Newton matrix assembled straight into grain blocks + one coupling matrix (issue 14) is the
+"""The Newton matrix assembled straight into grain blocks + one coupling matrix (docs/linear-solvers.md) is the
 matrix a1 M + K_int + K_contact assembled the long way (sparse sums of the global matrices)."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""A pack truly at rest takes implicit steps (issue 14, docs/dynamics.md "A pack truly at rest").
+"""A pack truly at rest takes implicit steps (docs/dynamics.md "A pack truly at rest").
 
 tests/data/pack30_mu015.npz (30 sand grains settled at the real density, friction history included)
 is first quieted: 0.02 s with the pack stage's mass damping raised to 100 1/s leaves its fastest

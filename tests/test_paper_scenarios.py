@@ -253,7 +253,7 @@ def test_paper_examples_are_valid_configs(name):
     assert cfg["material"]["E"] == 90e9 and cfg["material"]["nu"] == 0.16 and cfg["material"]["density"] == 2200.0
     implicit = name.endswith("-implicit")
     base = name.removesuffix("-implicit")
-    if implicit:  # the paper's own method at the real density (issue 14)
+    if implicit:  # the paper's own method at the real density (docs/results.md)
         assert cfg["solver"]["integrator"] == "implicit" and cfg["solver"]["mass_scaling"] == 1.0
     if base.startswith("paper-collapse"):
         expected = {"high": (0.9, 0.8), "mid": (0.6, 0.5), "low": (0.3, 0.2)}[base.rsplit("-", 1)[1]]

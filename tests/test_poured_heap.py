@@ -1,4 +1,4 @@
-"""The poured heap (issue 17): a settled pack flows out from under its rising box onto a disc of
+"""The poured heap (docs/repose.md): a settled pack flows out from under its rising box onto a disc of
 finite radius. With 16 grains the heap is too low for a flank fit, so friction is read from the
 heap's shape: grains that roll further off and a lower, wider heap when friction falls."""
 

@@ -30,7 +30,7 @@ LOW_MOUND = 2.3 * D
 LOW_MOUND_TOLERANCE_DEG = 4.0
 # The reported uncertainty is part of each test's tolerance, so it is bounded too: a regression that
 # scattered the sectors would otherwise widen the tolerance with it. Measured on these heaps
-# (session 68): cones 0.5-2.1 deg, square pyramids 0.6-2.2, low mounds 1.0-2.7, wedges in a
+# cones 0.5-2.1 deg, square pyramids 0.6-2.2, low mounds 1.0-2.7, wedges in a
 # channel 1.3-3.5, quarter heaps 0.9-2.5.
 UNCERTAINTY_CAP_DEG = 3.0
 LOW_MOUND_UNCERTAINTY_CAP_DEG = 4.0

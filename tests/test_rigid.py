@@ -1,4 +1,4 @@
-"""Rigid grains (model/rigid.py, solver/rigid.py, solver/rigid_implicit.py; issue 16): exact mass
+"""Rigid grains (model/rigid.py, solver/rigid.py, solver/rigid_implicit.py; docs/dynamics.md): exact mass
 properties, free rotation without energy drift, a spin about a principal axis integrated exactly,
 Coulomb on an incline, a head-on collision against the flexible grains at E = 90 GPa (both rigid
 integrators), the implicit one's Newton matrix against differences of its residual, and the
@@ -203,7 +203,7 @@ def test_frozen_cycling_pairs_barely_move_the_head_on_rebound():
     """`[solver] freeze_cycles` (the default) keeps a pair that cycles in and out of Newton's set, and
     holds out a found one that twins a steady record (the same touching spot). Measured rebound:
     0.038245 m/s with frozen pairs, 0.038268 without, 0.038270 with rigid grains. Counting the twins
-    twice (session 14) made it 0.24 % faster (0.038360): this test fails on that rule."""
+    twice made it 0.24 % faster (0.038360): this test fails on that rule."""
     frozen, free = head_on("flexible"), head_on("flexible", freeze_cycles=False)
     assert frozen == pytest.approx(free, rel=1e-3)
     assert frozen.sum() == pytest.approx(0.0, abs=1e-9)  # momentum

@@ -1,4 +1,4 @@
-"""Trustworthy runs (issue 15): a used --out is never mixed with a new run, refusals leave nothing
+"""Trustworthy runs (docs/errors.md): a used --out is never mixed with a new run, refusals leave nothing
 behind, summaries are strict JSON, and mistakes about files are one line with exit status 2."""
 
 import json

@@ -188,9 +188,9 @@ def test_grain_behind_a_wall_is_a_config_error(tmp_path, capsys):
 
 @pytest.mark.parametrize("solver", INTEGRATORS, ids=IDS)
 def test_summary_energy_balance_never_shows_a_gain(tmp_path, solver):
-    """summary.json's energy balance (issue 17): released potential, dissipation and the balance
+    """summary.json's energy balance (docs/dynamics.md, "Energy books"): released potential, dissipation and the balance
     error from history.csv; no integrator may end with more energy than it started with plus
-    what it dissipated beyond 1 % of the released potential (issue 17; the implicit one loses
+    what it dissipated beyond 1 % of the released potential (the implicit one loses
     what gamma > 1/2 damps: a negative error). Measured: implicit -16 %, explicit +0.03 %, rigid
     +0.2 % (a trapezoid of powers at mixed velocities had given +1.3 % and +8 %)."""
     cfg = drop_config(duration=0.014, **solver)

@@ -1,4 +1,4 @@
-"""Shape descriptors against closed forms, and the angular grain option (issue 17)."""
+"""Shape descriptors against closed forms, and the angular grain option (docs/results.md, grain shapes)."""
 
 import numpy as np
 import pytest

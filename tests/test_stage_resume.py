@@ -1,4 +1,4 @@
-"""Every stage of a two-stage scenario resumes to the same bits (issue 15): pile_collapse and
+"""Every stage of a two-stage scenario resumes to the same bits (docs/errors.md): pile_collapse and
 lid_compression settle their [pack] first, into DIR/pack; a run killed in either stage and
 continued with resume=True ends with the files of a run that was never interrupted."""
 

@@ -62,7 +62,7 @@ def test_the_wall_time_adds_up_over_the_parts_of_a_resumed_run(tmp_path, monkeyp
     assert earlier > 0
     resumed = scene_mod.run(cfg, tmp_path / "cut", resume=True)
     assert resumed["wall_seconds_total"] == pytest.approx(earlier + resumed["wall_seconds"], rel=1e-12)
-    # a checkpoint from before session 63 kept no wall time: the total is unknown, not the last part's
+    # an early format-0 checkpoint kept no wall time: the total is unknown, not the last part's
     interrupted(cfg, tmp_path / "old", monkeypatch, after=2)
     with np.load(tmp_path / "old/checkpoint.npz") as d:
         entries = {k: d[k] for k in d.files if k != "wall_seconds"}

@@ -1,5 +1,5 @@
-"""Sweeps over seeds (issue 17): seed is a product axis even with --zip, sweep.csv gains mean and
-std rows per setting, sweep.png draws mean and spread; round-off is not a trend (issue 15)."""
+"""Sweeps over seeds (docs/sweeps.md): seed is a product axis even with --zip, sweep.csv gains mean and
+std rows per setting, sweep.png draws mean and spread; round-off is not a trend."""
 
 import csv
 import statistics

@@ -1,4 +1,4 @@
-"""The tilting box (issue 17): gravity turns in the box's frame until the surface avalanches.
+"""The tilting box (docs/repose.md): gravity turns in the box's frame until the surface avalanches.
 
 References: the surface fit against planes of known angle; a cube on the box's floor against
 the closed form of a block on a slope whose tilt grows at a constant rate (with mu_s = mu_d it

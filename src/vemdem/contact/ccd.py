@@ -303,7 +303,7 @@ def impact_step_limit(gap: np.ndarray, rate: np.ndarray, m_eq: np.ndarray, law_p
 def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params,
                         m_eq: np.ndarray, zeta: float) -> float:  # fmt: skip
     """The central-difference stability limit of every active pair as the explicit integrator sees
-    it, its damping included (issue 17):
+    it, its damping included:
 
         omega^2 = k(g) sum_i w_i^2 / m_i          the pair's spring on its nodes' lumped masses
         c       = 2 zeta sqrt(k(g) m_eq)          the normal damping friction.py applies (grain masses)

@@ -291,7 +291,7 @@ def point_triangle_closest(p, t0, t1, t2):
     ok, u, v = vertex_face_lcp(p, t0, t1, t2)
     if ok:
         return PT_T, _norm3(p - (1.0 - u - v) * t0 - u * t1 - v * t2)
-    # np.int64: numba compiles a callee once per literal argument value (issue 15: compile time)
+    # np.int64: numba compiles a callee once per literal argument value (compile time: tests/test_compile_once.py)
     k, d = _point_point_candidate(p, t0, np.int64(PT_T0), np.int64(-1), np.inf)
     k, d = _point_point_candidate(p, t1, np.int64(PT_T1), k, d)
     k, d = _point_point_candidate(p, t2, np.int64(PT_T2), k, d)

@@ -11,7 +11,7 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   eligible vertex-face pair with either face at the edge, a concave edge only to
                   both; with `[contact] edge_edge_rule` (formulation 4.4, the paper's hierarchy) also
                   to two or more eligible edge-edge pairs between the edge and edges at the vertex.
-                  Off by default since session 23: the rule switches the record on inside the
+                  Off by default: the rule switches the record on inside the
                   layer as they leave (an energy jump), and with the edge-edge fade, fade.py, it
                   would leave the spot unsupported; off, one spot can count up to three times,
                   which the angle of repose does not show beyond its scatter (docs/contact.md)

@@ -30,7 +30,7 @@ def energy_balance(history_csv, since: float | None = None) -> dict | None:
     gravity + contact at both, what damping and friction dissipated between them, the potential
     energy gravity released, the work the moving walls did on the grains (W), and the balance
     error (E_end + dissipated - E_start - W) relative to the largest of the released potential,
-    the initial kinetic energy and |W| (issue 17: within 1 % when the integrator keeps the books;
+    the initial kinetic energy and |W| (within 1 % when the integrator keeps the books, docs/dynamics.md;
     a removed wall takes its contact energy with it). `since`: from the first frame at or after
     that time (a scenario that works on the grains until then, as the tilting box turning
     gravity). None when there are fewer than two frames."""
@@ -46,7 +46,7 @@ def energy_balance(history_csv, since: float | None = None) -> dict | None:
 
     released = first["gravity"] - last["gravity"]
     dissipated = last["dissipated"] - first["dissipated"]
-    # the moving walls' work on the grains (history.csv before session 21 has no column for it)
+    # the moving walls' work on the grains (an early 0.1.0 run's history.csv has no column for it)
     work = last["wall_work"] - first["wall_work"] if "wall_work" in last else 0.0
     scale = max(abs(released), first["kinetic"], abs(work), 1e-300)
     return {
@@ -123,7 +123,8 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "mean_time_step": state.t / max(stats.accepted, 1),
         "wall_seconds": wall,
         # over every part of a resumed run (each part's time loop up to its last checkpoint, then this one's
-        # wall_seconds); None where a part's checkpoint kept no wall time (before session 63)
+        # wall_seconds); None where a part's checkpoint kept no wall time (an early format-0 one:
+        # driver/checkpoint.py)
         "wall_seconds_total": None if run.earlier_wall_seconds is None else run.earlier_wall_seconds + wall,
         # step-control keys a --resume changed, each {key, then, now, time, frame}: [] for a run stepped as
         # configured from its start (docs/errors.md)

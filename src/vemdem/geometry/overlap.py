@@ -1,4 +1,4 @@
-"""Do placed grains overlap? Checked before a run starts (issue 15): two grains that interpenetrate
+"""Do placed grains overlap? Checked before a run starts (docs/errors.md): two grains that interpenetrate
 at t = 0 have no contact pair between them (the barrier only acts across a positive gap), and
 the run would fail later with a message about something else.
 

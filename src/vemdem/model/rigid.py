@@ -1,4 +1,4 @@
-"""Rigid grains: the body-model seam's second model (issue 16).
+"""Rigid grains: the body-model seam's second model (docs/dynamics.md, "Rigid grains").
 
 Each grain is a rigid polyhedron with six dofs: its centroid c and the rotation R of its
 principal axes. Its vertices are x_i = c + R X_i, X_i the vertex in the principal frame at the

@@ -1,6 +1,6 @@
 """`scenario = "tilting_box"`: a settled pack in its box is tilted until its surface avalanches.
 
-The tilting-box test of granular materials (issue 17): the maximum angle of stability (the
+The tilting-box test of granular materials (docs/repose.md): the maximum angle of stability (the
 surface's angle when it avalanches) and the angle of repose after the avalanche, from one box.
 The box (the pack's floor and four walls) stays put and gravity turns in its frame: tilted by theta
 about the y axis, +x end down, g(theta) = |g| (sin theta, 0, -cos theta) (analysis.tilt). Turning

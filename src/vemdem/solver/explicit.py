@@ -15,7 +15,7 @@ Stable step, recomputed every step (the safety factor covers the nonlinearity):
 - omega_p^2 = k(g) sum_i w_i^2 / m_i for each active pair, its weights w on its nodes' lumped
   masses (a wall node has 1/m = 0), k(g) the current contact stiffness: the exact eigenvalue of
   the pair's spring; zeta_p the damping ratio its normal damping really has on those masses
-  (contact.ccd.damped_contact_step: 2-4 for the default zeta = 0.5, issue 17);
+  (contact.ccd.damped_contact_step: 2-4 for the default zeta = 0.5);
 - approach: no step may close more than `approach_fraction` of a pair's gap, at its exact gap rate
   for pairs in the activation layer, at a bound on the speed for pairs not yet in it.
 A step whose end state is not admissible (a vertex behind a wall, an inverted element, a non-finite

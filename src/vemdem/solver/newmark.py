@@ -55,15 +55,16 @@ class NewmarkParameters:
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
     mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
     # first iterate: "rigid" (each grain's rigid part of x_n + dt v_n + dt^2/2 a_n), "acceleration"
-    # (all of it) or "rest" (x_n), CCD-bounded. "rigid" since session 11: a quarter fewer Newton
-    # iterations and 15 % less wall time on the 515-grain collapse at the real density (docs/dynamics.md)
+    # (all of it) or "rest" (x_n), CCD-bounded. "rigid" against "rest": a quarter fewer
+    # Newton iterations and 15 % less wall time on the 515-grain collapse at the real density (docs/dynamics.md)
     predictor: str = "rigid"
     linear: object = None  # a solver.linear LinearSolver, made once per run (None: "auto")
     krylov_rtol: float = 1e-8  # relative residual of iterative linear solves (inexact Newton)
     # > 0: Eisenstat-Walker forcing, the Krylov tolerance of iteration k is
     # min(krylov_forcing, max(krylov_rtol, 0.9 (|R_k| / |R_k-1|)^2)) (safeguarded); 0: krylov_rtol always.
-    # 0.1 since session 18: GMRES iterations 1,068 -> 299 over 1e-4 s of the 515-grain lid jam (Newton
-    # 214 -> 218, wall -20 %), 6,406 -> 3,258 over the 30-grain lid cycle (same force curve to 5e-7)
+    # 0.1 against 0 (every solve to krylov_rtol): GMRES iterations 1,068 -> 299 over 1e-4 s of the 515-grain
+    # lid jam (Newton 214 -> 218, wall -20 %), 6,406 -> 3,258 over the 30-grain lid cycle (same force
+    # curve to 5e-7; docs/linear-solvers.md)
     krylov_forcing: float = 0.1
     line_search: bool = False  # backtrack on the incremental potential (IPC's merit) while the update is large
     ccd: str = "global"  # Newton update bound: "global" (one bound for all pairs) or "pairwise" (contact.ccd)
@@ -208,7 +209,7 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
 def newton_blocks(scene: Scene, el, cr, touched=None):
     """The Newton matrix K = a1 M + K_int + K_contact as the bodies' dense blocks (`el`, evaluated
     with mass_shift a1, plus the contact terms within a grain, added in place by a compiled kernel)
-    and one sparse coupling matrix (contact terms between grains): no sparse sums (issue 14).
+    and one sparse coupling matrix (contact terms between grains): no sparse sums (docs/linear-solvers.md).
     touched (N,) bool, if given, marks the vertices whose blocks received contact terms."""
     blocks = el.blocks  # freshly allocated by evaluate: updated in place
     bodies = scene.bodies

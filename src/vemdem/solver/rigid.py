@@ -1,5 +1,5 @@
 """Explicit integration of rigid grains (model/rigid.py): velocity Verlet for the centroids and a
-symplectic splitting for the rotations (issue 16).
+symplectic splitting for the rotations (docs/dynamics.md, "Rigid grains").
 
 Per step of length h, with force F and torque T (about the centroid) from contact, gravity at the
 centroid and mass damping alpha:
@@ -65,7 +65,7 @@ def free_rotation(rotation, momentum, moments, h):
         R = out[g]
         pi = np.empty(3)
         _body_momentum(R, momentum[g], pi)
-        # np.int64: numba compiles a callee once per literal argument value (issue 15: compile time)
+        # np.int64: numba compiles a callee once per literal argument value (compile time: tests/test_compile_once.py)
         _axis_flow(R, pi, moments[g], np.int64(0), 0.5 * h)
         _axis_flow(R, pi, moments[g], np.int64(1), 0.5 * h)
         _axis_flow(R, pi, moments[g], np.int64(2), h)

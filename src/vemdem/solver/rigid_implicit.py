@@ -1,6 +1,6 @@
 """Implicit integration of rigid grains (model/rigid.py): Newmark on the centroids and on the
 angular momenta, the rotations by the same exact free-rotation flow as the explicit integrator
-(solver/rigid.py), Newton on the six dofs of every grain (issue 16).
+(solver/rigid.py), Newton on the six dofs of every grain (docs/dynamics.md, "Rigid grains").
 
 Per step of length h, with beta and gamma as the flexible integrator's (0.3025 and 0.6), force F
 and torque T (contact, gravity at the centroid, mass damping) at the end of the step:

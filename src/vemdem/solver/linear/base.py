@@ -1,6 +1,6 @@
 """The linear-solver room: one interface for every solver of the Newton systems.
 
-A Newton system keeps the structure the physics gives it (issue 14): the dense block of every body
+A Newton system keeps the structure the physics gives it (docs/linear-solvers.md): the dense block of every body
 (element tangent + a1 M + the contact terms within the body) and one sparse coupling matrix (the
 contact terms between bodies), plus the positions that define each body's rigid modes:
 

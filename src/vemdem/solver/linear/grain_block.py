@@ -1,9 +1,9 @@
-"""Right-preconditioned GMRES with a two-level grain-block preconditioner (issue 14).
+"""Right-preconditioned GMRES with a two-level grain-block preconditioner (docs/linear-solvers.md).
 
 K = blockdiag(B_g) + C (base.NewtonSystem). The preconditioner P^-1 is multiplicative, coarse first
-(../shared/docs/performance.md, round 2: 2 GMRES iterations to 1e-10 at 515 and 4096 grains, at
-steps from 1e-4 to 1e-2 s; block LU alone stalls beyond 1e-3 s, the additive coarse space barely
-helps):
+(../shared/docs/performance.md, "measured on vemdem's own Newton systems": 2 GMRES iterations to
+1e-10 at 515 and 4096 grains, at steps from 1e-4 to 1e-2 s; block LU alone stalls beyond 1e-3 s,
+the additive coarse space barely helps):
 
     Z      (n x 6G): the 6 rigid modes of every grain, translations e_k and rotations
                      e_k x (x_i - c_g) / s_g on its vertices (s_g: the grain's size)
@@ -220,7 +220,7 @@ def _prolong(z, dof_ptr, c, out):
 
 # Up to this many bodies the coarse matrix is factorised dense (LAPACK), beyond by SuperLU. Build,
 # factorise and solve, one BLAS thread, block-sparse coarse matrices with 3 coupled neighbours per
-# body (benchmarks/bench_coarse.py, 2026-11-25): dense 0.17 / 0.75 / 1.6 / 5.6 / 20.3 ms at
+# body (benchmarks/bench_coarse.py, 2 cores): dense 0.17 / 0.75 / 1.6 / 5.6 / 20.3 ms at
 # 24 / 40 / 64 / 100 / 150 bodies, SuperLU 0.74 / 1.0 / 1.1 / 1.9 / 3.1 ms: the crossover lies
 # between 40 and 64 (it was 150, set from a faster machine's 24-grain figure).
 DENSE_COARSE_BODIES = 40
