@@ -50,7 +50,9 @@ def pile(integrator: str, mass_scaling: float, dt_max: float | None = None, max_
     if dt_max is not None:
         raw["solver"]["dt_max"] = dt_max
     if max_time is not None:  # the warm-up: a few steps of each stage
-        raw["settle"] = dict(raw["settle"], max_time=max_time)
+        # one frame, at rest or not at its end (output.every and settle.min_time may not exceed max_time)
+        raw["settle"] = dict(raw["settle"], max_time=max_time, min_time=max_time)
+        raw["output"] = dict(raw["output"], every=min(raw["output"]["every"], max_time))
     return raw
 
 

@@ -22,6 +22,7 @@ import os
 import shutil
 import sys
 import time
+import traceback
 import warnings
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -195,6 +196,36 @@ def _kernels_compiled() -> bool:
         return True
 
 
+# the errors that carry their own cause in words: vemdem's (TimeStepTooSmall names the last rejected
+# step's cause) and the ValueError, RuntimeError and LinAlgError that vemdem raises with a message
+_WORDED = (ValueError, RuntimeError)
+
+
+def _is_bug(exc: BaseException) -> bool:
+    """An error no input explains (a TypeError, an IndexError, ...): its traceback is what a report needs."""
+    return not isinstance(exc, (*_WORDED, ArithmeticError, OSError, MemoryError)) and not _own(exc)
+
+
+def _own(exc: BaseException) -> bool:
+    return type(exc).__module__.split(".")[0] == "vemdem"
+
+
+def _failure_text(exc: BaseException) -> str:
+    """A failed run's cause in words: never a bare "OverflowError: (34, 'Numerical result out of
+    range')", which names Python's complaint and not the run's."""
+    name = type(exc).__name__
+    if _own(exc) or isinstance(exc, _WORDED):
+        return f"{name}: {exc}"
+    if isinstance(exc, MemoryError):
+        return "out of memory: fewer grains or fewer vertices per grain, or a machine with more memory"
+    if isinstance(exc, OSError):
+        return f"cannot read or write {exc.filename or 'a file'} ({exc.strerror or exc})"
+    if isinstance(exc, ArithmeticError):
+        return (f"a number overflowed or was divided by zero ({name}: {exc}): a config value far outside a grain "
+                "run's that no bound caught, or a bug in vemdem; please report it with the config")  # fmt: skip
+    return f"an internal error ({name}: {exc}), a bug in vemdem: please report it with the config and the traceback"
+
+
 def cmd_run(args) -> int:
     try:
         cfg, module = checked_config(load_toml(args.config))
@@ -223,10 +254,12 @@ def cmd_run(args) -> int:
         print(f"\nvemdem: interrupted; continue from the last checkpoint with: vemdem run {args.config} --out {args.out} "
               "--resume", file=sys.stderr)  # fmt: skip
         return 130
-    except (ArithmeticError, RuntimeError, ValueError, OSError, MemoryError) as exc:
+    except Exception as exc:  # noqa: BLE001 - a started run's every failure is answered in words, exit status 1
         _settle_replaced(args.out, restore=False)
         _remove_if_empty(args.out, created)
-        print(f"vemdem: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        if _is_bug(exc):
+            traceback.print_exc()
+        print(f"vemdem: run failed: {_failure_text(exc)}", file=sys.stderr)
         print(f"vemdem: results written so far are in {args.out}", file=sys.stderr)
         return 1
     _settle_replaced(args.out, restore=False)

@@ -93,6 +93,17 @@ def _motion(spec: dict, where: str) -> Motion:
         raise ConfigError(f"{where}: {exc}") from None
 
 
+def _direction(normal: list, key: str) -> np.ndarray:
+    """A wall's normal scaled to its largest component: any finite non-zero vector gives the same plane
+    (its norm, squared on the way, overflowed to inf for a component of 1e300 and underflowed to 0 for
+    one of 1e-300, and the wall lost its normal)."""
+    n = np.array(normal, float)
+    largest = np.max(np.abs(n))
+    if largest == 0:
+        raise ConfigError(f"{key}: must not be the zero vector")
+    return n / largest
+
+
 def build_walls(specs: list, base_dir=None):
     """The `[[walls]]` tables as plane and mesh walls with their prescribed motion: (planes, meshes)."""
     planes, meshes = [], []
@@ -101,9 +112,8 @@ def build_walls(specs: list, base_dir=None):
         name = spec["name"] or f"wall {i}"
         motion = _motion(spec, where)
         if spec["type"] == "plane":
-            if np.linalg.norm(spec["normal"]) == 0:
-                raise ConfigError(f"{where}.normal: must not be the zero vector")
-            planes.append(PlaneWall(np.array(spec["point"], float), np.array(spec["normal"], float), motion, name,
+            normal = _direction(spec["normal"], f"{where}.normal")
+            planes.append(PlaneWall(np.array(spec["point"], float), normal, motion, name,
                                     frictionless=spec["frictionless"]))  # fmt: skip
             continue
         if not spec["file"]:
