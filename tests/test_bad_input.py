@@ -1,5 +1,5 @@
 """Bad input gets exit status 2, one line on stderr naming the key or file, no traceback, and no
-output folder left behind (issue 15). Each case mutates the `drop` example (a `scene` run) or
+output folder left behind (docs/errors.md). Each case mutates the `drop` example (a `scene` run) or
 a `pile` example, or breaks a file the config names."""
 
 import copy
@@ -129,6 +129,59 @@ CONFIG_CASES = [
     # a Newton tolerance of 1 or more accepted the first iterate: forces 5 % off at 18 % strain, silently
     ("compression: rtol of 1e30", COMPRESSION, setter("solver.rtol", 1e30), "solver.rtol"),
     ("lid: a billion frames", LID, setter("lid.frames", 10**9), "lid.frames"),
+    # magnitudes no grain run meets, each refused by name with its bound: a density of 1e300 once ran
+    # to its end on overflow warnings, a grain of 1e300 m ended in an OverflowError
+    ("density of 1e300", DROP, setter("material.density", 1e300), "material.density: must be in [1, 1e5] kg/m^3"),
+    ("density of 1e-3", DROP, setter("material.density", 1e-3), "material.density: must be in [1, 1e5] kg/m^3"),
+    ("E of 1 Pa", DROP, setter("material.E", 1.0), "material.E: must be in [1e3, 1e13] Pa"),
+    ("E of 1e300", DROP, setter("material.E", 1e300), "material.E: must be in [1e3, 1e13] Pa"),
+    ("grain of 1e300 m", DROP, setter("grains.0.size", 1e300), "grains[0].size: must be in [1e-7, 10] m"),
+    ("grain of 1e-9 m", DROP, setter("grains.0.size", 1e-9), "grains[0].size: must be in [1e-7, 10] m"),
+    ("grain at 1e300 m", DROP, setter("grains.1.position", [0.0, 0.0, 1e300]), "grains[1].position: must have a "
+     "magnitude of at most 1e3 m"),
+    ("grain at 1e300 m/s", DROP, setter("grains.1.velocity", [0.0, 0.0, -1e300]), "grains[1].velocity: must have a "
+     "magnitude of at most 1e3 m/s"),
+    ("grain turned by 1e300 rad", DROP, setter("grains.1.rotation", [0.0, 0.0, 1e300]), "grains[1].rotation"),
+    ("gravity of 1e300", DROP, setter("gravity", [0.0, 0.0, -1e300]), "gravity: must have a magnitude of at most 1e4"),
+    ("duration of 1e300 s", DROP, setter("duration", 1e300), "duration: must be in (0, 1e4] s"),
+    ("dt_min of 1e-300 s", DROP, setter("solver.dt_min", 1e-300), "solver.dt_min: must be in [1e-15, 10] s"),
+    ("wall point at 1e300 m", DROP, setter("walls.0.point", [0.0, 0.0, -1e300]), "walls[0].point"),
+    ("wall times of 1e300 s", DROP, setter("walls.0.times", [0.0, 1e300]), "walls[0].times: must be times within"),
+    ("wall displacement of 1e300 m", DROP, lambda c: (setter("walls.0.times", [0.0, 1.0])(c), setter(
+        "walls.0.displacements", [[0.0, 0.0, 0.0], [0.0, 0.0, 1e300]])(c)), "walls[0].displacements"),
+    ("activation gap of 1e300 m", DROP, setter("contact.activation_gap", 1e300), "contact.activation_gap: must be in"),
+    # each once ended in "run failed: OverflowError" or "ZeroDivisionError" from the contact law's scales
+    ("switch factor of 1e-300", DROP, setter("contact.switch_factor", 1e-300), "contact.switch_factor: must be in"),
+    ("barrier exponent of -1e300", DROP, setter("contact.barrier_exponent", -1e300), "contact.barrier_exponent"),
+    ("penalty exponent of 1e300", DROP, setter("contact.penalty_exponent", 1e300), "contact.penalty_exponent"),
+    # Qhull's page-long complaint once
+    ("elongation of 1e-300", DROP, setter("grains.0.elongation", 1e-300), "grains[0].elongation: must be in [0.01, 1]"),
+    ("mass damping of 1e300", DROP, setter("solver.mass_damping", 1e300),
+     "solver.mass_damping: must be in [0, 1e6] 1/s"),
+    ("mass scaling of 1e300", DROP, setter("solver.mass_scaling", 1e300), "solver.mass_scaling: must be in [1, 1e8]"),
+    # a singular mass matrix once, every step rejected down to TimeStepTooSmall
+    ("beta_mass of 0", DROP, setter("vem.beta_mass", 0.0), "vem.beta_mass: must be in (0, 1]"),
+    # the loop cut its only frame to the run's end
+    ("output.every above duration", DROP, setter("output.every", 1.0),
+     "output.every: must not exceed duration (0.02 s)"),
+    ("pile: output.every above settle.max_time", PILE, setter("output.every", 5.0),
+     "output.every: must not exceed settle.max_time"),
+    ("pile: settle.max_time of 1e300 s", PILE, setter("settle.max_time", 1e300),
+     "settle.max_time: must be in (0, 1e4]"),
+    ("pile: box of 1e300 m", PILE, setter("pack.box.width", 1e300), "pack.box.width: must be in [1e-7, 10] m"),
+    ("pile: clearance of 1e300", PILE, setter("pack.grains.clearance", 1e300), "pack.grains.clearance: must be in"),
+    ("lid: speed of 1e-300", LID, setter("lid.speed", 1e-300), "lid.speed: must be in [1e-6, 1e3] m/s"),
+    ("lid: start at 1e300 m", LID, setter("lid.start", 1e300), "lid.start: must be in [1e-7, 10] m"),
+    # counts: more is a typo that runs out of memory or time
+    ("pile: a billion grains", PILE, setter("pack.n_grains", 10**9), "pack.n_grains: must be from 1 to 1,000,000"),
+    ("pile: a million vertices", PILE, setter("pack.grains.vertices", 10**6),
+     "pack.grains.vertices: must be from 8 to 1,000"),
+    ("a million vertices", DROP, setter("grains.0.vertices", 10**6), "grains[0].vertices: must be from 4 to 1,000"),
+    ("a billion Newton iterations", DROP, setter("solver.max_iterations", 10**9),
+     "solver.max_iterations: must be from 1 to 1,000"),
+    ("compression: a billion load steps", COMPRESSION, setter("loading.steps", 10**9),
+     "loading.steps: must be from 1 to 100,000"),
+    ("compression: a billion iterations", COMPRESSION, setter("solver.max_iterations", 10**9), "solver.max_iterations"),
 ]
 
 
@@ -362,3 +415,56 @@ def test_malformed_toml(tmp_path, cli):
 def test_missing_config_file(tmp_path, cli):
     code, _, err = cli("run", tmp_path / "nowhere.toml", "--out", tmp_path / "out", "--quiet")
     assert_one_line_error(code, err, "nowhere.toml")
+
+
+def _written_checkpoint(tmp_path, cli):
+    """A drop run's folder cut back to a run that stopped before its end, and its config."""
+    path = good_drop(tmp_path)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--quiet")[0] == 0
+    (out / "summary.json").unlink()
+    return path, out
+
+
+def _with_entries(checkpoint, **changes):
+    with np.load(checkpoint, allow_pickle=False) as d:
+        entries = {k: d[k] for k in d.files}
+    entries.update(changes)
+    entries = {k: v for k, v in entries.items() if v is not None}
+    np.savez(checkpoint, **entries)
+
+
+def test_every_checkpoint_carries_its_format(tmp_path, cli):
+    from vemdem.driver.checkpoint import FORMAT
+
+    _, out = _written_checkpoint(tmp_path, cli)
+    with np.load(out / "checkpoint.npz", allow_pickle=False) as d:
+        assert d["format"].item() == FORMAT == 1
+
+
+# a newer vemdem's checkpoint, and numbers no vemdem writes
+UNKNOWN_FORMATS = {"newer": (np.array(2), "format 2"), "negative": (np.array(-1), "format -1"),
+                   "a float": (np.array(1.0), "format 1.0"), "a text": (np.array("one"), "format 'one'"),
+                   "a boolean": (np.array(True), "format True"), "a list": (np.array([0, 1]), "format [0, 1]")}  # fmt: skip
+
+
+@pytest.mark.parametrize("number, needle", list(UNKNOWN_FORMATS.values()), ids=list(UNKNOWN_FORMATS))
+def test_a_checkpoint_of_an_unknown_format_is_one_line_and_keeps_the_outputs(tmp_path, cli, number, needle):
+    path, out = _written_checkpoint(tmp_path, cli)
+    before = (out / "history.csv").read_bytes()
+    _with_entries(out / "checkpoint.npz", format=number)
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert_one_line_error(code, err, f"--resume: {out / 'checkpoint.npz'} is a checkpoint of {needle}; ")
+    assert "this vemdem reads formats 0, 1 (it writes 1)" in err
+    assert (out / "history.csv").read_bytes() == before
+    code, _, err = cli("status", out)
+    assert_one_line_error(code, err, f"is a checkpoint of {needle}; this vemdem reads formats 0, 1")
+
+
+def test_a_checkpoint_without_a_format_number_resumes_as_format_0(tmp_path, cli):
+    """The checkpoints written before the number: the same entries, read as they always were."""
+    path, out = _written_checkpoint(tmp_path, cli)
+    _with_entries(out / "checkpoint.npz", format=None)
+    assert cli("status", out)[0] == 0
+    code, _, err = cli("run", path, "--out", out, "--quiet", "--resume")
+    assert code == 0, err

@@ -46,7 +46,7 @@ def test_run_writes_results(tmp_path, cli):
     "edit,key,problem",
     [
         (("nu = 0.16", "nu = 0.5"), "material.nu", "must be in (-1, 0.5)"),
-        (("E = 90e9", "E = -1.0"), "material.E", "must be > 0"),
+        (("E = 90e9", "E = -1.0"), "material.E", "must be in [1e3, 1e13] Pa"),
         (("E = 90e9", 'E = "stiff"'), "material.E", "expected a number"),
         (("max_strain = 0.3", "max_strain = 1.0"), "loading.max_strain", "must be in (0, 1)"),
         (("steps = 3", "steps = 2.5"), "loading.steps", "expected an integer"),

@@ -42,8 +42,11 @@ def test_the_bounds_are_the_checks_own_messages():
     frames = tables.LID_COMPRESSION["lid"]["frames"]
     assert reference.bounds(frames) == ["must be > 0", "must be at most 50,000 per phase"]
     assert reference.bounds(tables.SOLVER["gamma"]) == ["must be in [0.5, 1]"]
-    assert reference.bounds(tables.CONTACT["barrier_exponent"]) == ["must be < -1"]
-    assert reference.bounds(tables.SCENE_GRAIN["position"]) == ["must be a list of 3 finite numbers"]
+    assert reference.bounds(tables.CONTACT["barrier_exponent"]) == ["must be in [-10, -1)"]
+    assert reference.bounds(tables.MATERIAL["density"]) == ["must be in [1, 1e5] kg/m^3"]
+    assert reference.bounds(tables.SCENE_GRAIN["position"]) == ["must be a list of 3 finite numbers",
+                                                               "must have a magnitude of at most 1e3 m"]
+    assert reference.bounds(tables.WALL["times"]) == ["must be a list of finite numbers", "must be times within +-1e4 s"]
     assert reference.bounds(tables.WALL["flip"]) == []
 
 

@@ -7,6 +7,7 @@ a scene. Key names are a contract with users (docs, examples, sweeps): extend, n
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from ..geometry.submesh import METHODS
@@ -55,24 +56,106 @@ def _in(lo, hi, lo_open=False, hi_open=False):
     return check
 
 
-def _at_least(lo):
-    return lambda v: None if v >= lo else f"must be >= {lo:g}"
-
-
 def _stabilised(v):
     return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the element without stabilisation: singular stiffness)"
 
 
+def _mass_stabilised(v):
+    # the projection's own mass matrix has rank 4 (a constant and a linear field): without the
+    # sub-mesh's share the implicit step's matrix is singular and every step is rejected
+    return None if 0 < v <= 1 else "must be in (0, 1] (0 leaves the mass matrix singular)"
+
+
+# ------------------------------------------------------------------ bounds of physical magnitudes
+# Far beyond any grain run (sand: 2650 kg/m^3, 70 GPa; grains of 0.1-10 mm followed for seconds),
+# so a value outside them is a typo or a slip of units. Refused by name here, before it overflows
+# in a kernel: a density of 1e300 ran to its end on overflow warnings, a 1e300 m grain ended in an
+# OverflowError, a 1e300 m/s grain in a zero-volume grain. The check's message states the bound,
+# which is how it reaches the config reference (config/reference.py, its "allowed" column).
+def _num(v) -> str:
+    """A bound as people write it: 1e5, 1e-7, 0.5, 10 (not 100000 or 1e+05)."""
+    if v == 0 or 1e-3 <= abs(v) < 1e3:
+        return f"{v:g}"
+    mantissa, exponent = f"{v:e}".split("e")
+    return f"{mantissa.rstrip('0').rstrip('.')}e{int(exponent)}"
+
+
+def _within(lo, hi, unit, lo_open=False):
+    """Check: a magnitude in [lo, hi] (lo_open: (lo, hi]) `unit`."""
+    span = f"{'(' if lo_open else '['}{_num(lo)}, {_num(hi)}] {unit}".rstrip()
+
+    def check(v):
+        return None if (lo < v if lo_open else lo <= v) and v <= hi else f"must be in {span}"
+
+    return check
+
+
+def _count(lo, hi):
+    """Check: an integer count from lo to hi; more is a typo that would run out of memory or time."""
+    return lambda v: None if lo <= v <= hi else f"must be from {lo:,} to {hi:,}"
+
+
+def _vector_within(limit, unit):
+    """Check: a list of 3 finite numbers whose length is at most `limit` `unit`."""
+
+    def check(v):
+        return vector3(v) or (None if math.hypot(*v) <= limit else f"must have a magnitude of at most {_num(limit)} {unit}")
+
+    return check
+
+
+def _times_within(limit):
+    """Check: a list of finite times (s), each within +-limit."""
+
+    def check(v):
+        return finite_numbers(v) or (None if all(abs(t) <= limit for t in v) else f"must be times within "
+                                     f"+-{_num(limit)} s")  # fmt: skip
+
+    return check
+
+
+def _vectors_within(limit, unit):
+    """Check: a list of [x, y, z] lists, each at most `limit` `unit` long."""
+
+    def check(v):
+        return vectors3(v) or (None if all(math.hypot(*d) <= limit for d in v) else f"must be [x, y, z] lists of a "
+                               f"magnitude of at most {_num(limit)} {unit}")  # fmt: skip
+
+    return check
+
+
+MAX_COORDINATE = 1e3  # m: positions, wall points and displacements lie within a kilometre of the origin
+MAX_SPEED = 1e3  # m/s: a grain's initial speed
+MAX_GRAVITY = 1e4  # m/s^2: about 1,000 g, above any centrifuge test
+MAX_ROTATION = 1e3  # rad: a rotation vector's angle
+MAX_TIME = 1e4  # s: durations and times
+MAX_GRAINS = 1_000_000
+MAX_VERTICES = 1_000  # per grain
+MAX_ITERATIONS = 1_000  # Newton's, per step or load step
+
+# the checks of one magnitude each
+_DENSITY = _within(1.0, 1e5, "kg/m^3")
+_MODULUS = _within(1e3, 1e13, "Pa")
+_LENGTH = _within(1e-7, 10.0, "m")  # grain sizes, boxes, lids, discs
+_DRIVE_SPEED = _within(1e-6, MAX_SPEED, "m/s")  # a lid's or a box's: a slower one never ends (2 mm: 2,000 s)
+_DURATION = _within(0.0, MAX_TIME, "s", lo_open=True)
+_TIME = _within(0.0, MAX_TIME, "s")
+_STEP = _within(1e-15, 10.0, "s")  # time steps
+_ITERATIONS = _count(1, MAX_ITERATIONS)
+_MASS_DAMPING = _within(0.0, 1e6, "1/s")  # settling uses 20 1/s
+_AXIS_RATIO = _within(0.01, 1.0, "")  # a grain's axes: a needle or a plate of 100 to 1 at the most
+
+
 # -------------------------------------------------------------------------------- shared tables
 MATERIAL = {
-    "E": Field(float, REQUIRED, positive, "Young's modulus (Pa)"),
+    "E": Field(float, REQUIRED, _MODULUS, "Young's modulus (Pa)"),
     "nu": Field(float, REQUIRED, poisson, "Poisson's ratio"),
-    "density": Field(float, 2200.0, positive, "kg/m^3"),
+    "density": Field(float, 2200.0, _DENSITY, "kg/m^3"),
 }
 
 VEM = {
     "beta_internal": Field(float, 0.5, _stabilised, "beta_i of paper eq. 8"),
-    "beta_mass": Field(float, 1.0, unit_interval, "beta_d of paper eq. 8"),
+    "beta_mass": Field(float, 1.0, _mass_stabilised, "beta_d of paper eq. 8"),
     "beta_load": Field(float, 1.0, unit_interval, "beta_e of paper eq. 8"),
     "submesh": Field(METHODS, "auto", doc="stabilisation sub-mesh"),
 }
@@ -80,10 +163,10 @@ VEM = {
 GRAIN = {
     "shape": Field(SHAPES, "cube", doc="grain shape; 'file' needs the key file"),
     "file": Field(str, "", doc="surface file (STL/OBJ/PLY), relative to the config file"),
-    "size": Field(float, 1.45e-3, positive, "cube edge, or equivalent diameter of other shapes (m)"),
-    "vertices": Field(int, 30, _at_least(4), "random: number of vertices"),
-    "elongation": Field(float, 0.8, _in(0, 1, lo_open=True), "random: intermediate/long axis"),
-    "flatness": Field(float, 0.8, _in(0, 1, lo_open=True), "random: short/intermediate axis"),
+    "size": Field(float, 1.45e-3, _LENGTH, "cube edge, or equivalent diameter of other shapes (m)"),
+    "vertices": Field(int, 30, _count(4, MAX_VERTICES), "random: number of vertices"),
+    "elongation": Field(float, 0.8, _AXIS_RATIO, "random: intermediate/long axis"),
+    "flatness": Field(float, 0.8, _AXIS_RATIO, "random: short/intermediate axis"),
     "roughness": Field(float, 0.15, _in(0, 0.5, hi_open=True), "random: relative radial perturbation"),
     "truncate": Field(float, 0.7, open_unit_interval, "random: flat ends at |z| <= truncate * c (compression)"),
     "seed": Field(int, 0, non_negative, "random: seed; same seed, same grain"),
@@ -92,35 +175,36 @@ GRAIN = {
 SCENE_GRAIN = {k: v for k, v in GRAIN.items() if k != "truncate"}
 SCENE_GRAIN.update(
     {
-        "position": Field(list, REQUIRED, vector3, "centroid (m)"),
-        "rotation": Field(list, [0.0, 0.0, 0.0], vector3, "rotation vector (rad)"),
-        "velocity": Field(list, [0.0, 0.0, 0.0], vector3, "initial velocity (m/s)"),
+        "position": Field(list, REQUIRED, _vector_within(MAX_COORDINATE, "m"), "centroid (m)"),
+        "rotation": Field(list, [0.0, 0.0, 0.0], _vector_within(MAX_ROTATION, "rad"), "rotation vector (rad)"),
+        "velocity": Field(list, [0.0, 0.0, 0.0], _vector_within(MAX_SPEED, "m/s"), "initial velocity (m/s)"),
     }
 )
 
 WALL = {
     "type": Field(("plane", "mesh"), REQUIRED),
-    "point": Field(list, [0.0, 0.0, 0.0], vector3, "plane: a point on it"),
+    "point": Field(list, [0.0, 0.0, 0.0], _vector_within(MAX_COORDINATE, "m"), "plane: a point on it (m)"),
     "normal": Field(list, [0.0, 0.0, 1.0], vector3, "plane: normal pointing towards the grains"),
     "file": Field(str, "", doc="mesh: surface file (STL/OBJ/PLY), relative to the config file"),
     "flip": Field(bool, False, doc="mesh: reverse the faces (normals must face the grains)"),
     "name": Field(str, "", doc="label in outputs"),
     "frictionless": Field(bool, False, doc="no friction on this wall's pairs (a mirror plane; docs/contact.md)"),
-    "removed_at": Field(float, None, non_negative, "time at which the wall disappears (s)"),
-    "times": Field(list, [0.0], finite_numbers, "times of the piecewise-linear displacement history (s)"),
-    "displacements": Field(list, [[0.0, 0.0, 0.0]], vectors3, "rigid displacement at each time (m)"),
+    "removed_at": Field(float, None, _TIME, "time at which the wall disappears (s)"),
+    "times": Field(list, [0.0], _times_within(MAX_TIME), "times of the piecewise-linear displacement history (s)"),
+    "displacements": Field(list, [[0.0, 0.0, 0.0]], _vectors_within(MAX_COORDINATE, "m"),
+                           "rigid displacement at each time (m)"),
 }
 
 CONTACT = {
     "mu_s": Field(float, 0.0, non_negative, "static friction coefficient"),
     "mu_d": Field(float, None, non_negative, "dynamic friction coefficient [mu_s]"),
-    "activation_gap": Field(float, None, positive, "m [0.01 grain size]"),
+    "activation_gap": Field(float, None, _within(1e-12, 1.0, "m"), "m [0.01 grain size]"),
     "reference_force": Field(float, None, positive, "N, force per contact at the switch gap, for loads far above "
                              "the weight (a lid: its force over its contacts) [10 grain weights]"),
     "penalty": Field(float, None, positive, "eps1 [from the reference force at the switch gap]"),
-    "switch_factor": Field(float, None, open_unit_interval),
-    "penalty_exponent": Field(float, None, _at_least(1)),
-    "barrier_exponent": Field(float, None, lambda v: None if v < -1 else "must be < -1"),
+    "switch_factor": Field(float, None, _in(1e-3, 1, hi_open=True)),
+    "penalty_exponent": Field(float, None, _in(1, 10)),
+    "barrier_exponent": Field(float, None, _in(-10, -1, hi_open=True)),
     "tangential_penalty": Field(float, None, positive, "N/m [the normal stiffness at the switch gap]"),
     "tangential_viscosity": Field(float, None, non_negative, "N s/m [0]"),
     "damping_ratio": Field(float, None, non_negative, "normal damping ratio [0.5]"),
@@ -139,18 +223,18 @@ SOLVER = {
     "integrator": Field(INTEGRATORS, "implicit", doc="implicit Newmark or explicit central differences"),
     "linear": Field(LINEAR_SOLVERS, "auto", doc="implicit: linear solver of the Newton systems (docs/linear-solvers.md)"),
     "predictor": Field(PREDICTORS, "rigid",
-                       doc="implicit, flexible grains: Newton's first iterate: each grain's rigid part of the "
-                           "constant-acceleration motion, all of it, or the step's start (runs before session 11: "
-                           "rest; docs/dynamics.md)"),
+                       doc="implicit, flexible grains: Newton's first iterate: rigid, each grain's rigid part of the "
+                           "constant-acceleration motion; acceleration, all of it; rest, the step's start "
+                           "(docs/dynamics.md)"),
     # gamma 0.6 with beta (gamma + 1/2)^2 / 4: numerical damping of the unresolved contact and
     # element modes. With gamma 0.5 a grain at rest on a slope crept (0.15 grain sizes/s at 0.8 of
     # the friction angle) and Newton took 9 iterations per step; with 0.6 it stays (docs/dynamics.md)
     "beta": Field(float, 0.3025, _in(0, 0.5, lo_open=True), "Newmark beta"),
     "gamma": Field(float, 0.6, _in(0.5, 1), "Newmark gamma (> 0.5: damps the unresolved high modes)"),
-    "dt": Field(float, 1e-5, positive, "initial time step (s)"),
-    "dt_min": Field(float, 1e-10, positive, "the run stops below this step (s)"),
-    "dt_max": Field(float, 1e-4, positive, "largest step (s)"),
-    "max_iterations": Field(int, 15, positive, "Newton iterations before a step is rejected"),
+    "dt": Field(float, 1e-5, _STEP, "initial time step (s)"),
+    "dt_min": Field(float, 1e-10, _STEP, "the run stops below this step (s)"),
+    "dt_max": Field(float, 1e-4, _STEP, "largest step (s)"),
+    "max_iterations": Field(int, 15, _ITERATIONS, "Newton iterations before a step is rejected"),
     "newton_xtol": Field(
         float, 1e-6, _in(0, 1e-3, lo_open=True),
         "implicit, flexible grains: Newton ends when its correction is below this share of the step's displacement "
@@ -162,7 +246,7 @@ SOLVER = {
         "after grow_after easy steps in a row the step grows by 1.5",
     ),
     "grow_after": Field(
-        int, 3, positive,
+        int, 3, _count(1, 1_000),
         "implicit, flexible grains: easy steps in a row after which the step grows by 1.5 (1: after every "
         "easy step; the 515-grain lid jam at the real density, docs/dynamics.md)",
     ),
@@ -198,7 +282,8 @@ SOLVER = {
         "(0: every block its LU; docs/linear-solvers.md: 18 % less per Newton iteration early in a collapse)",
     ),
     "impact_steps": Field(
-        float, 0.0, non_negative, "implicit: contact-impact step control, steps per half contact oscillation (0: off)"
+        float, 0.0, _within(0.0, 1e4, ""), "implicit: contact-impact step control, steps per half contact oscillation "
+        "(0: off)"
     ),
     "entry_fraction": Field(
         float, 0.05, _in(0, 1, lo_open=True), "implicit: share of the activation gap an approaching pair may close per step"
@@ -210,9 +295,9 @@ SOLVER = {
         "was made for: docs/dynamics.md)",
     ),
     "safety": Field(float, 0.5, _in(0, 1, lo_open=True), "explicit: share of the critical step taken"),
-    "mass_damping": Field(float, 0.0, non_negative, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
+    "mass_damping": Field(float, 0.0, _MASS_DAMPING, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
     "mass_scaling": Field(
-        float, 1.0, _at_least(1), "density factor for inertia, weight and contact scales (docs/dynamics.md)"
+        float, 1.0, _within(1.0, 1e8, ""), "density factor for inertia, weight and contact scales (docs/dynamics.md)"
     ),
 }
 
@@ -224,7 +309,8 @@ MODEL = {
 }
 
 OUTPUT = {
-    "every": Field(float, 1e-3, positive, "simulated time between written frames (s)"),
+    "every": Field(float, 1e-3, positive, "simulated time between written frames (s), from a 100,000th of the run's "
+                   "duration to all of it"),
     "vtk": Field(bool, True, doc="write the ParaView series grains.pvd"),
 }
 
@@ -232,15 +318,15 @@ SETTLE = {
     "kinetic_threshold": Field(
         float, 1e-3, positive, "at rest when the mean kinetic energy per grain is below this share of m g d"
     ),
-    "min_time": Field(float, 0.02, non_negative, "s before rest is checked"),
-    "max_time": Field(float, 1.0, positive, "s of simulated time at most (the run stops, unsettled, then)"),
+    "min_time": Field(float, 0.02, _TIME, "s before rest is checked"),
+    "max_time": Field(float, 1.0, _DURATION, "s of simulated time at most (the run stops, unsettled, then)"),
 }
 
 # -------------------------------------------------------------------------------- scenario schemas
 SCENE = {
     "scenario": Field(("scene",), REQUIRED),
-    "gravity": Field(list, [0.0, 0.0, -9.81], vector3, "m/s^2"),
-    "duration": Field(float, REQUIRED, positive, "simulated time (s)"),
+    "gravity": Field(list, [0.0, 0.0, -9.81], _vector_within(MAX_GRAVITY, "m/s^2"), "m/s^2"),
+    "duration": Field(float, REQUIRED, _DURATION, "simulated time (s)"),
     "material": MATERIAL,
     "vem": VEM,
     "model": MODEL,
@@ -259,11 +345,11 @@ GRAIN_COMPRESSION = {
     "loading": {
         "mode": Field(("uniaxial", "confined"), "uniaxial"),
         "max_strain": Field(float, 0.3, open_unit_interval, "engineering strain 1 - h/h0"),
-        "steps": Field(int, 30, positive, "load steps"),
+        "steps": Field(int, 30, _count(1, 100_000), "load steps"),
     },
     "solver": {
         "rtol": Field(float, 1e-9, open_unit_interval, "Newton tolerance, relative"),
-        "max_iterations": Field(int, 40, positive),
+        "max_iterations": Field(int, 40, _ITERATIONS),
     },
     "output": {
         "vtk": Field(bool, True, doc="write the ParaView series grain.pvd"),
@@ -288,7 +374,7 @@ SETTLING_DAMPING = 20.0
 def granular_tables(mu_s: float, mu_d: float, every: float) -> dict:
     """The tables pack, pile_collapse and lid_compression share (the paper's material)."""
     return {
-        "gravity": Field(list, [0.0, 0.0, -9.81], vector3, "m/s^2"),
+        "gravity": Field(list, [0.0, 0.0, -9.81], _vector_within(MAX_GRAVITY, "m/s^2"), "m/s^2"),
         "material": PAPER_MATERIAL,
         "vem": VEM,
         "model": MODEL,
@@ -301,23 +387,24 @@ def granular_tables(mu_s: float, mu_d: float, every: float) -> dict:
 
 PACK = {
     "scenario": Field(("pack",), REQUIRED),
-    "n_grains": Field(int, 515, positive, "number of grains"),
+    "n_grains": Field(int, 515, _count(1, MAX_GRAINS), "number of grains"),
     "seed": Field(int, 0, non_negative, "seeds the sizes, shapes, orientations and positions"),
     "grains": {
-        "size": Field(float, 1.45e-3, positive, "mean equivalent diameter (m)"),
+        "size": Field(float, 1.45e-3, _LENGTH, "mean equivalent diameter (m)"),
         "size_spread": Field(float, 0.1, _in(0, 1, hi_open=True), "sizes uniform in size (1 +- size_spread)"),
         "shape": Field(("sand", "angular"), "sand",
                        doc="sand: hull of points on an ellipsoid (rounded); angular: an ellipsoid cut by planes "
                            "(flat faces, sharp edges; docs/results.md, grain shapes)"),
-        "vertices": Field(int, 30, _at_least(8), "vertices per grain (angular: about)"),
-        "elongation": Field(float, 0.8, _in(0, 1, lo_open=True)),
-        "flatness": Field(float, 0.8, _in(0, 1, lo_open=True)),
+        "vertices": Field(int, 30, _count(8, MAX_VERTICES), "vertices per grain (angular: about)"),
+        "elongation": Field(float, 0.8, _AXIS_RATIO),
+        "flatness": Field(float, 0.8, _AXIS_RATIO),
         "roughness": Field(float, 0.15, _in(0, 1, hi_open=True)),
-        "clearance": Field(float, 0.02, non_negative, "gap between grains in the column, in circumscribed radii"),
+        "clearance": Field(float, 0.02, _within(0.0, 10.0, "radii"),
+                           "gap between grains in the column, in circumscribed radii"),
     },
     "box": {
-        "width": Field(float, 8e-3, positive, "x side (m)"),
-        "depth": Field(float, 8e-3, positive, "y side (m)"),
+        "width": Field(float, 8e-3, _LENGTH, "x side (m)"),
+        "depth": Field(float, 8e-3, _LENGTH, "y side (m)"),
     },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }
@@ -330,7 +417,7 @@ def pack_stage() -> dict:
     table = {k: PACK[k] for k in ("n_grains", "seed", "grains", "box")}
     table["mu_s"] = Field(float, 0.6, non_negative, "friction while settling")
     table["mu_d"] = Field(float, 0.5, non_negative, "friction while settling")
-    table["mass_damping"] = Field(float, SETTLING_DAMPING, non_negative, "1/s, mass damping while settling")
+    table["mass_damping"] = Field(float, SETTLING_DAMPING, _MASS_DAMPING, "1/s, mass damping while settling")
     return table
 
 
@@ -359,7 +446,7 @@ POURED_HEAP = {
     "initial_state": INITIAL_STATE,
     "pack": pack_stage(),
     "source": {
-        "lift_speed": Field(float, 0.02, positive, "speed at which the box around the pack rises (m/s): the grains "
+        "lift_speed": Field(float, 0.02, _DRIVE_SPEED, "speed at which the box around the pack rises (m/s): the grains "
                             "flow out under it, slow against their settling speed"),
         "open": Field(("all", "corner"), "all",
                       doc="all: the four sides rise, the disc is centred under the box; corner: the -x and -y "
@@ -367,8 +454,8 @@ POURED_HEAP = {
                           "centred on the corner: a quarter of the heap of a pack four times as large"),
     },
     "disc": {
-        "radius": Field(float, 8e-3, positive, "radius of the floor disc (m); grains that roll off it are lost"),
-        "catch_depth": Field(float, 5e-3, positive, "depth of the catch floor below the disc (m)"),
+        "radius": Field(float, 8e-3, _LENGTH, "radius of the floor disc (m); grains that roll off it are lost"),
+        "catch_depth": Field(float, 5e-3, _LENGTH, "depth of the catch floor below the disc (m)"),
     },
     **granular_tables(mu_s=0.6, mu_d=0.5, every=5e-3),
 }
@@ -380,7 +467,8 @@ TILTING_BOX = {
     "pack": pack_stage(),
     "tilt": {
         "start": Field(float, 10.0, _in(0.0, 90.0, hi_open=True), "tilt of the box at t = 0 (degrees)"),
-        "rate": Field(float, 20.0, positive, "tilt rate (degrees/s): slow against an avalanche's growth"),
+        "rate": Field(float, 20.0, _within(1e-3, 1e4, "degrees/s"),
+                      "tilt rate (degrees/s): slow against an avalanche's growth"),
         "max": Field(float, 60.0, _in(0.0, 90.0, lo_open=True, hi_open=True),
                      "largest tilt (degrees): a box that has not avalanched by then ends the run"),
         "avalanche": Field(("kinetic", "surface"), "kinetic", doc="what marks the avalanche: the pack's mean kinetic "
@@ -402,9 +490,9 @@ LID_COMPRESSION = {
     "initial_state": INITIAL_STATE,
     "pack": pack_stage(),
     "lid": {
-        "start": Field(float, 7e-3, positive, "lid height above the floor at the start and the end (m)"),
-        "end": Field(float, 4.9e-3, positive, "lowest lid height (m)"),
-        "speed": Field(float, 0.02, positive, "lid speed (m/s): slow against the grains' settling speed"),
+        "start": Field(float, 7e-3, _LENGTH, "lid height above the floor at the start and the end (m)"),
+        "end": Field(float, 4.9e-3, _LENGTH, "lowest lid height (m)"),
+        "speed": Field(float, 0.02, _DRIVE_SPEED, "lid speed (m/s): slow against the grains' settling speed"),
         "frames": Field(int, 100, _lid_frames, "frames (force samples) per phase"),
     },
     **granular_tables(mu_s=0.15, mu_d=0.15, every=1e-3),
@@ -415,6 +503,54 @@ LID_COMPRESSION["output"] = {"vtk": OUTPUT["vtk"]}  # frames come from lid.frame
 # fell from 15 kN to 0.4 kN and back when the lid turned; with 0.05 the curve is continuous there
 # (the paper-compression run, docs/results.md)
 LID_COMPRESSION["contact"] = with_defaults(LID_COMPRESSION["contact"], damping_ratio=0.05)
+
+
+# The servo of a stress-controlled wall (model/servo.py) and the rule a load path's stage ends by
+# (driver/stages.py): shared by the laboratory tests
+SERVO = {
+    "gain": Field(float, 0.3, _in(0, 1, lo_open=True),
+                  "share of the force error the wall's travel closes per step, against its own contact layer's "
+                  "stiffness (docs/servo.md)"),
+    "inertia_number": Field(float, 5e-4, _in(0, 1e-2, lo_open=True),
+                            "the wall's speed cap: the speed that gives this inertia number I = rate d / sqrt(sigma / "
+                            "rho) at the stage's target stress (quasi-static below 1e-3)"),
+    "stress_tolerance": Field(float, 0.01, _in(0, 0.5, lo_open=True),
+                              "a stage's target is reached when the wall's stress is within this share of it"),
+    "unbalanced_tolerance": Field(float, 0.01, _in(0, 1, lo_open=True),
+                                  "...and the sample at rest: mean net force on a grain over the mean contact force "
+                                  "below this"),
+}
+
+
+def _stress(v):
+    return None if 0 < v <= 1e9 else "must be in (0, 1e9] Pa"
+
+
+STAGE = {
+    "stress": Field(float, REQUIRED, _stress, "target normal stress on the lid (Pa)"),
+    "max_time": Field(float, 1.0, positive, "the stage ends after this much simulated time, reached or not (s)"),
+    "max_strain": Field(float, 0.6, open_unit_interval,
+                        "a loading stage ends when the axial strain passes this (a target the sample cannot reach)"),
+}
+
+OEDOMETER = {
+    "scenario": Field(("oedometer",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "lid": {
+        "gap": Field(float, 0.05, _in(0, 10, lo_open=True),
+                     "the lid starts this many mean grain sizes above the pack's highest point"),
+        "area": Field(float, None, positive, "loaded area of the lid (m^2) [the box's cross-section]"),
+    },
+    "stages": TableList(STAGE, min_items=1),
+    "servo": SERVO,
+    **granular_tables(mu_s=0.15, mu_d=0.15, every=5e-3),
+}
+# The paper's method by default: implicit Newmark at the real density (no mass scaling). Its
+# steps stay at most 1e-4 s, as the lid cycles': with 1e-3 s a loose 60-grain pack under the lid
+# stalled twice in its seating (Newton at 1e-10 s steps; docs/oedometer.md)
+OEDOMETER["solver"] = SOLVER
+OEDOMETER["contact"] = with_defaults(OEDOMETER["contact"], damping_ratio=0.05)  # as the lid cycle's: elastic contacts
 
 
 # -------------------------------------------------------------------------------- cross-field rules
@@ -452,8 +588,9 @@ def check_rules(cfg: dict) -> None:
         raise ConfigError(f"gravity: the tilting box turns gravity from straight down; give [0, 0, -g], got "
                           f"{[float(v) for v in gravity]}")  # fmt: skip
     _check_frames(cfg)
+    _check_every_within_run(cfg)
     lid = cfg.get("lid")
-    if isinstance(lid, dict) and lid["end"] >= lid["start"]:
+    if isinstance(lid, dict) and "end" in lid and lid["end"] >= lid["start"]:
         raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
 
 
@@ -468,3 +605,26 @@ def _check_frames(cfg: dict) -> None:
     if frames > MAX_FRAMES:
         raise ConfigError(f"output.every: {every:g} s writes {frames:.3g} frames over {duration:g} s "
                           f"(at most {MAX_FRAMES:,}); choose a larger interval")  # fmt: skip
+
+
+# the scenarios that run for settle.max_time (the others add a tilt, a lift or load stages to it)
+SETTLE_IS_DURATION = ("pack", "pile_collapse")
+
+
+def _run_length(cfg: dict) -> tuple[str, float] | None:
+    """(key, seconds) of the simulated time a run lasts where one key fixes it, else None."""
+    if "duration" in cfg:
+        return "duration", cfg["duration"]
+    if cfg.get("scenario") in SETTLE_IS_DURATION and "max_time" in cfg.get("settle", {}):
+        return "settle.max_time", cfg["settle"]["max_time"]
+    return None
+
+
+def _check_every_within_run(cfg: dict) -> None:
+    """A frame interval longer than the run: the loop would cut its only frame to the run's end, so
+    the interval asked for is never the one written (a slip of units or of keys)."""
+    every = cfg.get("output", {}).get("every")
+    length = _run_length(cfg)
+    if every is not None and length is not None and every > length[1]:
+        key, seconds = length
+        raise ConfigError(f"output.every: must not exceed {key} ({seconds:g} s), got {every:g}")

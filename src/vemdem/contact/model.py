@@ -35,7 +35,7 @@ from .forces import (
 )
 from .friction import MU_D, MU_S, ZETA, FrictionLaw, dissipative_forces, dissipative_terms
 from .feature_list import FeatureList
-from .law import InterfaceLaw
+from .law import InterfaceLaw, normal_stiffness
 from .narrow import VERTEX_FACE
 from .pairs import FEATURE_A, FEATURE_B, FLOAT_COLS, GAP, GRAIN_A, GRAIN_B, INT_COLS, KIND, NODE0, find_contacts
 from .topology import build_topology
@@ -273,14 +273,20 @@ class ContactModel:
     def wall_nodes(self, t: float) -> np.ndarray:
         """Positions of the walls' nodes at t (read-only; the walls' motions are prescribed, so the
         last time's positions are kept: a Newton iteration asks for them several times)."""
-        if self._wall_nodes_at is not None and self._wall_nodes_at[0] == t:
+        key = (t, self._steerings())
+        if self._wall_nodes_at is not None and self._wall_nodes_at[0] == key:
             return self._wall_nodes_at[1]
         nodes = [m.vertices_at(t) for m in self.meshes]
         nodes += [pl.point_at(t) + frame for pl, frame in zip(self.planes, self._plane_frames)]
         out = np.vstack(nodes) if nodes else np.zeros((0, 3))
         out.setflags(write=False)
-        self._wall_nodes_at = (t, out)
+        self._wall_nodes_at = (key, out)
         return out
+
+    def _steerings(self) -> int:
+        """How often the steered walls (contact.walls.ServoMotion) changed course: a wall's path at
+        a time may change when it is steered, so the caches keyed on time carry this count too."""
+        return sum(getattr(w.motion, "version", 0) for w in self.meshes + self.planes)
 
     def all_positions(self, x: np.ndarray, t: float) -> np.ndarray:
         return np.ascontiguousarray(np.vstack([x, self.wall_nodes(t)]))
@@ -438,13 +444,14 @@ class ContactModel:
 
     def _wall_velocities(self, t):
         """Velocities of the walls' nodes at t (read-only, kept for the last t as wall_nodes)."""
-        if self._wall_velocities_at is not None and self._wall_velocities_at[0] == t:
+        key = (t, self._steerings())
+        if self._wall_velocities_at is not None and self._wall_velocities_at[0] == key:
             return self._wall_velocities_at[1]
         vel = [np.repeat(m.motion.velocity(t)[None, :], len(m.vertices), axis=0) for m in self.meshes]
         vel += [np.repeat(pl.motion.velocity(t)[None, :], 3, axis=0) for pl in self.planes]
         out = np.vstack(vel) if vel else np.zeros((0, 3))
         out.setflags(write=False)
-        self._wall_velocities_at = (t, out)
+        self._wall_velocities_at = (key, out)
         return out
 
     @property
@@ -457,6 +464,15 @@ class ContactModel:
         gap) over FORCE_MULTIPLE, the grain's own weight under the default weight law
         (contact/defaults.py), more where `reference_force` set the law for a lid's load."""
         return self.law.switch_force / FORCE_MULTIPLE
+
+    def wall_stiffness(self, ints: np.ndarray, floats: np.ndarray) -> np.ndarray:
+        """(n_walls,) the normal stiffness k(g) summed over each wall's records (in the order of
+        wall_reactions): d(normal force)/d(wall travel) with the grains held, an upper bound of the
+        sample's stiffness against that wall (a servo's gain: model/servo.py)."""
+        body = np.maximum(ints[:, GRAIN_A], ints[:, GRAIN_B])
+        mine = body >= self.n_grains
+        k = normal_stiffness(np.ascontiguousarray(floats[mine, GAP]), self.law_params)
+        return np.bincount(body[mine] - self.n_grains, weights=k, minlength=len(self.meshes) + len(self.planes))
 
     def wall_work(self, t0: float, t1: float, reactions0: np.ndarray, reactions1: np.ndarray) -> float:
         """Work of the walls' prescribed motion on the grains from t0 to t1: minus the grains' force

@@ -66,6 +66,68 @@ class Motion:
         return bool(np.ptp(np.asarray(self.displacements, float), axis=0).any())
 
 
+class ServoMotion:
+    """A wall's motion along one axis, steered step by step (a stress-controlled wall, model/servo.py).
+
+    Between two steerings it is linear in time: d(t) = d0 + (t - t0) s u, u the unit axis, s the
+    speed set at t0. `steer(t, s)` starts the next segment at t, where the wall then is, so the
+    path stays continuous. The segment before t0 is kept, so that a step's wall work (d(t1) -
+    d(t0) over the step just taken) and the integrators' look-back over one step read the path as
+    it was. The integrators ask it what they ask a Motion (displacement, velocity, active, moves);
+    `version` counts the steerings, so caches keyed on time alone can tell the path changed."""
+
+    removed_at = np.inf
+    moves = True
+
+    def __init__(self, axis):
+        u = np.asarray(axis, float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+            raise ValueError("servo motion: the axis must be a non-zero finite 3-vector")
+        self.axis = u / np.linalg.norm(u)
+        self.t0, self.d0, self.speed = 0.0, np.zeros(3), 0.0
+        self.t_prev, self.d_prev = 0.0, np.zeros(3)
+        self.version = 0
+
+    def displacement(self, t: float) -> np.ndarray:
+        if t >= self.t0 or self.t0 <= self.t_prev:
+            return self.d0 + (t - self.t0) * self.speed * self.axis
+        if t <= self.t_prev:
+            return self.d_prev.copy()
+        return self.d_prev + (self.d0 - self.d_prev) * ((t - self.t_prev) / (self.t0 - self.t_prev))
+
+    def velocity(self, t: float) -> np.ndarray:
+        if t >= self.t0 or self.t0 <= self.t_prev:
+            return self.speed * self.axis
+        return (self.d0 - self.d_prev) / (self.t0 - self.t_prev)
+
+    def active(self, t: float) -> bool:
+        return True
+
+    @property
+    def position(self) -> float:
+        """The wall's travel along its axis at the current anchor t0 (m)."""
+        return float(self.d0 @ self.axis)
+
+    def steer(self, t: float, speed: float) -> None:
+        """From t on, move at `speed` (m/s) along the axis (negative: against it)."""
+        if not np.isfinite(speed):
+            raise ValueError(f"servo motion: non-finite speed {speed!r} at t = {t:g} s")
+        d = self.displacement(t)
+        self.t_prev, self.d_prev = self.t0, self.d0
+        self.t0, self.d0, self.speed = float(t), d, float(speed)
+        self.version += 1
+
+    def carried(self) -> dict:
+        """The path's state, exactly (JSON floats round-trip), for a checkpoint."""
+        return {"t0": self.t0, "d0": self.d0.tolist(), "speed": self.speed, "t_prev": self.t_prev,
+                "d_prev": self.d_prev.tolist(), "version": self.version}  # fmt: skip
+
+    def carry_on(self, carried: dict) -> None:
+        self.t0, self.speed, self.t_prev = float(carried["t0"]), float(carried["speed"]), float(carried["t_prev"])
+        self.d0, self.d_prev = np.array(carried["d0"], float), np.array(carried["d_prev"], float)
+        self.version = int(carried["version"])
+
+
 @dataclass(frozen=True)
 class PlaneWall:
     point: np.ndarray

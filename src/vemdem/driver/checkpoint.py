@@ -19,6 +19,17 @@ class CheckpointError(ValueError):
     """A checkpoint is missing, unreadable or belongs to another config; str(e) names the file."""
 
 
+# The checkpoint's layout, saved in every checkpoint as its `format` entry. Raise it when an entry
+# changes its meaning or a reader needs a new one, and read each older number here on purpose or
+# refuse it in one line (a checkpoint read by guesswork resumes another run than the one it holds).
+# 0: the checkpoints of vemdem 0.1.0 written before the number; the earliest of them lack books
+#    added later (the walls' work, the linear solver's counters, the resumes' changes, the wall
+#    time), which then start again at the resume
+# 1: format 0 with its number
+FORMAT = 1
+READABLE_FORMATS = (0, 1)
+
+
 class ResumeChangeWarning(UserWarning):
     """A run resumed with changed step-control keys: from there on it is not the uninterrupted run."""
 
@@ -59,14 +70,16 @@ class WallWork:
 
 def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunStats, frame: int,
                     identity: RunIdentity, walls: WallWork | None = None, carried: dict | None = None,
-                    changes: list | None = None, wall_seconds: float | None = None):  # fmt: skip
+                    changes: list | None = None, wall_seconds: float | None = None,
+                    control_state: dict | None = None):  # fmt: skip
     """`carried`: the integrator's own (Integrator.carried), e.g. the linear solver's hold; `changes`: the
     step-control keys earlier resumes changed (Resumed.changes); `wall_seconds`: the time-loop's wall time
     of the run so far, all its parts (None: unknown, a run resumed from a checkpoint that kept none)."""
     tmp = path.with_suffix(".tmp.npz")
     h = state.history
     books = {} if walls is None else {"wall_work": walls.work, "wall_force": walls.force, "wall_t": walls.t}
-    np.savez(tmp, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated, power=state.power,
+    np.savez(tmp, format=FORMAT, t=state.t, x=state.x, v=state.v, a=state.a, dissipated=state.dissipated,
+             power=state.power,
              keys=h.keys, c_prev=h.c_prev, gt=h.gt, stick=h.stick, dt=control.dt, easy_streak=control.easy_streak,
              accepted=stats.accepted, rejected=stats.rejected, newton=stats.newton_iterations,
              krylov=stats.krylov_iterations, frame=frame, fingerprint=identity.fingerprint,
@@ -77,6 +90,7 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
              exact_tangent_blocks=stats.exact_tangent_blocks,
              carried=json.dumps(carried or {}, sort_keys=True), resume_changes=json.dumps(changes or []), **books,
              **({} if wall_seconds is None else {"wall_seconds": wall_seconds}),
+             **({} if control_state is None else {"control": json.dumps(control_state, sort_keys=True)}),
              **{f"body_{k}": v for k, v in state.bodies.items()})  # fmt: skip
     tmp.replace(path)  # atomic: an interrupted write never leaves a broken checkpoint
 
@@ -84,12 +98,12 @@ def save_checkpoint(path: Path, state: State, control: StepControl, stats: RunSt
 @dataclass
 class Resumed:
     """What a checkpoint gives back: the state and the run's books at its frame. `walls` is None for
-    a checkpoint written before session 21 (the walls' work book then starts again at the resume);
-    `carried` is {} for one written before session 32 (the linear solver then starts afresh).
+    a format-0 checkpoint that kept no walls' work (the book then starts again at the resume);
+    `carried` is {} for one that kept no linear-solver counters (the linear solver then starts afresh).
     `changes`: the step-control keys this and earlier resumes changed, each {key, then, now, time,
     frame} (summary.json "resume_changes"); [] for a run resumed as it was started. `wall_seconds`:
-    the time loop's wall time up to the checkpoint, over all parts; None for one written before
-    session 63."""
+    the time loop's wall time up to the checkpoint, over all parts; None for a checkpoint that kept
+    none (a format-0 one, or a run resumed from one: the total is unknown)."""
 
     state: State
     stats: RunStats
@@ -98,6 +112,7 @@ class Resumed:
     carried: dict
     changes: list = field(default_factory=list)
     wall_seconds: float | None = None
+    control: dict | None = None  # a load path's own state (driver/stages.py); None where the run has none
 
 
 def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple | None, end: tuple | None) -> None:
@@ -137,6 +152,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, sha
         raise CheckpointError(f"--resume: no checkpoint at {path}")
     try:
         with np.load(path, allow_pickle=False) as d:
+            _check_format(d, path, "--resume: ")
             changes = _config_changes(d, path, identity)
             history = ContactHistory(d["keys"], d["c_prev"], d["gt"], d["stick"].astype(bool))
             bodies = {k.removeprefix("body_"): d[k] for k in d.files if k.startswith("body_")}
@@ -145,7 +161,7 @@ def load_checkpoint(path: Path, control: StepControl, identity: RunIdentity, sha
             control.dt = float(d["dt"])
             control.easy_streak = int(d["easy_streak"])
             resumed = Resumed(state, _run_stats(d), int(d["frame"]), _wall_work(d), _carried(d), _earlier_changes(d),
-                              _wall_seconds(d))  # fmt: skip
+                              _wall_seconds(d), _control(d))  # fmt: skip
         _check_state(path, state, control.dt, resumed.frame, shape, end)
     except CheckpointError:
         raise
@@ -169,6 +185,7 @@ def checkpoint_books(path: Path) -> dict:
     A CheckpointError naming the file when it cannot be read."""
     try:
         with np.load(path, allow_pickle=False) as d:
+            _check_format(d, path)
             stats = _run_stats(d)
             books = {"time": float(d["t"]), "frame": int(d["frame"]), "step": float(d["dt"]),
                      "n_steps": stats.accepted, "n_rejected_steps": stats.rejected,
@@ -177,6 +194,8 @@ def checkpoint_books(path: Path) -> dict:
                      "newton_iterations_per_step": stats.newton_iterations / max(stats.accepted, 1),
                      "n_energy_gain_steps": stats.energy_gains, "resume_changes": _earlier_changes(d),
                      "wall_seconds_total": _wall_seconds(d)}  # fmt: skip
+    except CheckpointError:
+        raise
     except UNREADABLE_NPZ as exc:
         raise CheckpointError(f"{path} is not a readable checkpoint ({type(exc).__name__})") from None
     return books
@@ -188,11 +207,25 @@ def step_changes(path: Path, identity: RunIdentity) -> list[dict]:
     CheckpointError naming the other keys that changed (a finished stage asks this of its own)."""
     try:
         with np.load(path, allow_pickle=False) as d:
+            _check_format(d, path, "--resume: ")
             return _config_changes(d, path, identity)
     except CheckpointError:  # a ValueError too: the refusal itself, not an unreadable file
         raise
     except UNREADABLE_NPZ as exc:
         raise CheckpointError(f"--resume: {path} is not a readable checkpoint ({type(exc).__name__})") from None
+
+
+def _check_format(d, path: Path, prefix: str = "") -> None:
+    """A CheckpointError naming the file, its format and the ones this version reads, for a checkpoint
+    of a format it cannot read (a newer vemdem's, or a damaged number); 0 where it has none."""
+    number = d["format"] if "format" in d.files else np.array(0)
+    found = number.item() if number.ndim == 0 else number.tolist()
+    if type(found) is int and found in READABLE_FORMATS:  # not a bool, a float or a text
+        return
+    readable = ", ".join(map(str, READABLE_FORMATS))
+    advice = ": resume it with the vemdem that wrote it, or run again without --resume" if prefix else ""
+    raise CheckpointError(f"{prefix}{path} is a checkpoint of format {found!r}; this vemdem reads formats {readable} "
+                          f"(it writes {FORMAT}){advice}")  # fmt: skip
 
 
 def _config_changes(d, path: Path, identity: RunIdentity) -> list[dict]:
@@ -219,12 +252,13 @@ def _config_changes(d, path: Path, identity: RunIdentity) -> list[dict]:
 
 
 def _wall_seconds(d) -> float | None:
-    """The time loop's wall time over the run's parts (checkpoints before session 63 keep none)."""
+    """The time loop's wall time over the run's parts (None: a format-0 checkpoint, or a run resumed
+    from one, kept none)."""
     return float(d["wall_seconds"]) if "wall_seconds" in d.files else None
 
 
 def _earlier_changes(d) -> list:
-    """The step-control changes of earlier resumes (checkpoints before session 63 have none)."""
+    """The step-control changes of earlier resumes (early format-0 checkpoints keep none)."""
     if "resume_changes" not in d.files:
         return []
     changes = json.loads(str(d["resume_changes"]))
@@ -239,13 +273,14 @@ def _run_stats(d) -> RunStats:
     if "rejections" in d.files:
         stats.rejections = json.loads(str(d["rejections"]))
         stats.energy_gains = int(d["energy_gains"])
-    if "frozen_pair_steps" in d.files:  # checkpoints before session 14 have none
+    # the books below came one by one over format 0's life: an early checkpoint lacks the later ones
+    if "frozen_pair_steps" in d.files:
         stats.frozen_pair_steps = int(d["frozen_pair_steps"])
-    if "stick_break_steps" in d.files:  # checkpoints before session 30 have none
+    if "stick_break_steps" in d.files:
         stats.stick_break_steps = int(d["stick_break_steps"])
-    if "damping_hold_steps" in d.files:  # checkpoints before session 33 have none
+    if "damping_hold_steps" in d.files:
         stats.damping_hold_steps = int(d["damping_hold_steps"])
-    if "tangent_blocks" in d.files:  # checkpoints before session 34 have none
+    if "tangent_blocks" in d.files:
         stats.tangent_blocks = int(d["tangent_blocks"])
         stats.exact_tangent_blocks = int(d["exact_tangent_blocks"])
     return stats
@@ -266,6 +301,17 @@ def _carried(d) -> dict:
     if not _counters(carried):
         raise ValueError("carried: not an object of integer counters")
     return carried
+
+
+def _control(d) -> dict | None:
+    """The load control's own state (a servo's path, a load path's stage: driver/stages.py), a JSON
+    object; anything else is a damaged file (ValueError)."""
+    if "control" not in d.files:
+        return None
+    control = json.loads(str(d["control"]))
+    if not isinstance(control, dict):
+        raise ValueError("control: not an object")
+    return control
 
 
 def _counters(tree) -> bool:

@@ -22,7 +22,7 @@ from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
 from ..solver.state import RunStats, State
-from .checkpoint import RunIdentity, WallWork, load_checkpoint, save_checkpoint, truncate_csv
+from .checkpoint import CheckpointError, RunIdentity, WallWork, load_checkpoint, save_checkpoint, truncate_csv
 from .frames import FRAME_CSVS, FrameWriter
 
 
@@ -57,10 +57,13 @@ class Run:
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
              identity: RunIdentity, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
-             stop=None, control=None, on_frame=None) -> Run:  # fmt: skip
+             stop=None, control=None, on_frame=None, frame_csvs: tuple = (), volume=None) -> Run:  # fmt: skip
     """`on_frame(frame, state, contact)`, where given, sees every frame (its state and ContactResult)
     once it is written and before its checkpoint, so a run resumed from a frame's checkpoint has
-    been through that frame's hook (the lid keeps the states where it turns and lets go)."""
+    been through that frame's hook (the lid keeps the states where it turns and lets go).
+    `frame_csvs`: the scenario's own per-frame CSVs in out_dir (time first), cut back with the
+    loop's own on a resume. `volume(t, x)`: the sample's volume, where the scenario knows it (fabric.csv's
+    Love-Weber stress)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -70,17 +73,28 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
 
     def checkpoint(st: State, frames_written: int) -> None:
         wall = None if earlier is None else earlier + time.perf_counter() - t_start
-        save_checkpoint(ckpt, st, steps, stats, frames_written, identity, walls, integrator.carried(), changes, wall)
+        # a servo's path and a load path's stage (driver/stages.py)
+        own = control.carried() if hasattr(control, "carried") else None
+        save_checkpoint(ckpt, st, steps, stats, frames_written, identity, walls, integrator.carried(), changes, wall, own)
 
     if resume:
         resumed = load_checkpoint(ckpt, steps, identity, scene.bodies.reference.shape, (n_frames, duration))
         state, stats, frame = resumed.state, resumed.stats, resumed.frame
-        for name in FRAME_CSVS:
+        for name in FRAME_CSVS + tuple(frame_csvs):
+            # the FrameWriter starts a missing fabric.csv afresh (a run from before it was written),
+            # a scenario its own CSVs
+            if name not in FRAME_CSVS[:3] and not (out_dir / name).is_file():
+                continue
             truncate_csv(out_dir / name, state.t)
-        writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped)
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=frame + 1, lumped=integrator.lumped, volume=volume)
         last_contact = contact_now(scene, state)
         walls = resumed.walls or WallWork(0.0, last_contact.wall_reactions, state.t)
         integrator.carry_on(resumed.carried)
+        if hasattr(control, "carry_on"):
+            if resumed.control is None:
+                raise CheckpointError(f"--resume: {ckpt} holds no state of this run's load control; start the run "
+                                      "again without --resume")  # fmt: skip
+            control.carry_on(resumed.control)
         changes, earlier = resumed.changes, resumed.wall_seconds
     else:
         try:
@@ -89,7 +103,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         except PenetrationError as exc:
             raise InitialStateError(f"walls: a grain starts behind a wall ({exc})") from None
         stats, frame, changes, earlier = RunStats(), 0, [], 0.0
-        writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped)
+        writer = FrameWriter(scene, out_dir, vtk, resume_frames=None, lumped=integrator.lumped, volume=volume)
         last_contact = contact_now(scene, state)
         walls = WallWork(0.0, last_contact.wall_reactions, state.t)
         writer.write(state, scene.bodies.evaluate(state.x, force=False).total_energy, last_contact, walls.work)
@@ -99,8 +113,10 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
     # renew their pair search at every `advance` call, so they checkpoint at frames only.
     # A `control` hook may keep what it did since the last frame (the tilting box's gravity), which
-    # a checkpoint does not carry: such runs checkpoint at frames only too.
-    inside_frames = getattr(integrator, "checkpoints_inside_frames", False) and control is None
+    # a checkpoint does not carry: such runs checkpoint at frames only too, unless the hook hands
+    # over all it keeps (`carried`/`carry_on`: a load path, driver/stages.py).
+    inside_frames = getattr(integrator, "checkpoints_inside_frames", False) and (
+        control is None or hasattr(control, "carried"))
 
     def on_step(st, info, h):
         last["info"] = info

@@ -49,3 +49,15 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     second_central = second.sum(axis=0) - volume * np.outer(c, c)
     inertia = np.trace(second_central) * np.eye(3) - second_central
     return MassProperties(volume, origin + c, second_central, inertia)
+
+
+def body_volumes(x: np.ndarray, faces: np.ndarray, face_body: np.ndarray, n_bodies: int) -> np.ndarray:
+    """The enclosed volume of every body of a set of closed surfaces at positions x (its faces'
+    signed tetrahedra about the body's first face vertex summed per body): the grains' current
+    volumes, which a soft grain changes under load."""
+    ref = np.zeros((n_bodies, 3))
+    ref[face_body[::-1]] = x[faces[::-1, 0]]  # any point of the body keeps the sum exact; a near one keeps it accurate
+    o = ref[face_body]
+    a, b, c = x[faces[:, 0]] - o, x[faces[:, 1]] - o, x[faces[:, 2]] - o
+    vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    return np.bincount(face_body, weights=vol, minlength=n_bodies)

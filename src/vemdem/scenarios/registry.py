@@ -16,6 +16,7 @@ SCENARIOS = {
     "lid_compression": "vemdem.scenarios.lid_compression",
     "poured_heap": "vemdem.scenarios.poured_heap",
     "tilting_box": "vemdem.scenarios.tilting_box",
+    "oedometer": "vemdem.scenarios.oedometer",
 }
 
 EXAMPLES = {
@@ -30,8 +31,10 @@ EXAMPLES = {
     "paper-compression": "paper-compression.toml",
     "poured-heap": "poured-heap.toml",
     "tilting-box": "tilting-box.toml",
+    "oedometer": "oedometer.toml",
+    "paper-oedometer": "paper-oedometer.toml",
 }
-# the paper's own method at the real density (issue 14): the same runs, implicit, no mass scaling
+# the paper's own method at the real density (docs/results.md): the same runs, implicit, no mass scaling
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
 
 

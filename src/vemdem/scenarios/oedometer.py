@@ -1,0 +1,183 @@
+"""`scenario = "oedometer"`: a settled pack in a rigid box, loaded by a stress-controlled lid along
+a vertical stress path (docs/oedometer.md).
+
+The pack stays in its box (floor and four fixed side walls, which measure the lateral stress). A
+horizontal lid starts `lid.gap` mean grain sizes above the pack's highest point and is steered by
+a servo (model/servo.py) through the `[[stages]]` in turn: each stage holds its target stress
+until it is reached with the sample at rest, or ends at its time or strain limit
+(driver/stages.py). The lid's speed is capped where it would make the test faster than
+quasi-static: at most the speed that gives `servo.inertia_number` at the stage's target stress.
+
+axial strain = lid travel / the lid's starting height above the floor; sigma_v = the lid's force
+over its area; sigma_h = the side walls' mean normal force over their loaded area (box side x
+sample height); void ratio = box section x sample height / the grains' current volume - 1.
+
+Outputs in DIR: oedometer.csv (one row per frame: analysis.oedometer.HEADER), oedometer.png (e
+against log sigma_v; sigma_h against sigma_v; the lid's force against the strain), summary.json
+(K0, constrained_modulus_loading_Pa, constrained_modulus_unloading_Pa, hysteresis_energy,
+residual_strain, max_inertia_number, stages: what each stage did), fabric.csv and the scene
+outputs; `--resume` continues a run from inside any stage.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.microstructure import coordination, love_weber_stress
+from ..analysis.oedometer import (
+    HEADER,
+    inertia_number,
+    oedometer_figures,
+    plot_oedometer,
+    read_rows,
+    turning_points,
+)
+from ..config import ConfigError, tables
+from ..config.build import scene_from, solver_options_from
+from ..contact.walls import PlaneWall, ServoMotion, box_walls
+from ..driver.loop import simulate
+from ..driver.stages import LoadPath, Stage, unbalanced_force
+from ..driver.summary import run_summary
+from ..geometry.mass import body_volumes
+from ..io.results import CsvLog, write_json
+from ..model.servo import Servo
+from ..solver.api import make_integrator
+from .identity import run_identity
+from .pack import initial_state_from
+
+RESUMABLE = True
+SCHEMA = tables.OEDOMETER
+SIDES = ("wall -x", "wall +x", "wall -y", "wall +y")
+
+
+class StageNotReached(UserWarning):
+    """A stage ended at its time or strain limit, not at its target."""
+
+
+class Oedometer:
+    """The box, the lid and the measures of one test (the frames' rows and the stages' ends)."""
+
+    def __init__(self, cfg: dict, initial):
+        meta = initial.meta
+        self.box, self.floor, self.centre = tuple(meta["box"]), float(meta["floor"]), tuple(meta["centre"])
+        self.area = cfg["lid"]["area"] or self.box[0] * self.box[1]
+        self.grains = initial.grains
+        sizes = np.array([g.volume for g in initial.grains])
+        self.grain_size = float(np.mean(np.cbrt(6.0 * sizes / np.pi)))
+        top = float(initial.x[:, 2].max())
+        self.height0 = top - self.floor + cfg["lid"]["gap"] * self.grain_size
+        lid = PlaneWall(np.array([self.centre[0], self.centre[1], self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
+                        ServoMotion((0.0, 0.0, -1.0)), "lid")  # fmt: skip
+        self.lid = lid
+        self.walls = box_walls(*self.box, self.floor, self.centre) + [lid]
+
+    def bind(self, scene) -> None:
+        self.scene = scene
+        names = scene.contact.wall_names
+        self.lid_index = names.index("lid")
+        self.side_index = [names.index(n) for n in SIDES]
+        self.side_normals = np.array([scene.contact.planes[i - len(scene.contact.meshes)].normal for i in self.side_index])
+        self.faces, self.face_grain = scene.surface_triangles()
+
+    # ------------------------------------------------------------------ measures
+    def height(self, t: float) -> float:
+        return self.height0 - float(self.lid.motion.displacement(t) @ self.lid.motion.axis)
+
+    def strain(self, state) -> float:
+        return 1.0 - self.height(state.t) / self.height0
+
+    def sigma_h(self, reactions: np.ndarray, t: float) -> float:
+        force = -np.einsum("ij,ij->i", reactions[self.side_index], self.side_normals)
+        side_area = np.array([self.box[1], self.box[1], self.box[0], self.box[0]]) * self.height(t)
+        return float(np.mean(force / side_area))
+
+    def at_stage_end(self, state, info) -> dict:
+        return {"sigma_h_end": self.sigma_h(info.wall_reactions, state.t)}
+
+    def row(self, state, contact, stage: int, density: float) -> list:
+        h = self.height(state.t)
+        force = float(contact.wall_reactions[self.lid_index][2])
+        sigma_v = force / self.area
+        solids = float(np.sum(body_volumes(state.x, self.faces, self.face_grain, self.scene.n_grains)))
+        total = self.area * h
+        speed = float(self.lid.motion.speed)
+        records = contact.records(self.scene.contact.all_positions(state.x, state.t))
+        lw = love_weber_zz(self.scene, state.x, records, total)
+        z_m = coordination(records.a, records.b, self.scene.n_grains)["mechanical_coordination"]
+        unbalanced = unbalanced_force(state.a, self.scene.bodies.lumped, self.scene.bodies.vertex_ptr, contact)
+        return [state.t, stage, sigma_v, self.sigma_h(contact.wall_reactions, state.t), 1.0 - h / self.height0,
+                total / solids - 1.0, solids / total, z_m,
+                inertia_number(speed, h, self.grain_size, sigma_v, density), h, speed, force, lw, unbalanced]  # fmt: skip
+
+
+def love_weber_zz(scene, x, records, volume: float) -> float:
+    """sigma_zz of the contacts' stress tensor (Love-Weber: the sum over grains of f (x) (x_c -
+    x_g) over the sample volume; analysis.microstructure): the lid's stress, measured inside."""
+    sigma = love_weber_stress(records.a, records.b, records.point, records.force, scene.grain_centroids(x), volume)
+    return float(sigma[2, 2])
+
+
+def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> list[Stage]:
+    """The config's stages, each with the servo's speed cap: the lid speed that gives the inertia
+    number servo.inertia_number at the stage's target (rate = speed / height)."""
+    inertia = cfg["servo"]["inertia_number"]
+    return [Stage(s["stress"], s["max_time"], s["max_strain"], inertia * height * np.sqrt(s["stress"] / density) / grain_size)
+            for s in cfg["stages"]]  # fmt: skip
+
+
+def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
+    test = Oedometer(cfg, initial)
+    scene = scene_from(initial.grains, cfg, test.walls)
+    test.bind(scene)
+    integrator = make_integrator(solver_options_from(cfg), scene)
+    density = scene.material.density
+    stages = stages_from(cfg, density, test.height0, test.grain_size)
+    servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
+    path_ = LoadPath(servo, stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
+                     cfg["servo"]["stress_tolerance"], cfg["servo"]["unbalanced_tolerance"], test.at_stage_end)  # fmt: skip
+    identity = run_identity(cfg, SCHEMA)
+    resume_here = resume and (out_dir / "checkpoint.npz").is_file()
+    csv_path = out_dir / "oedometer.csv"
+    log = {}
+
+    def on_frame(frame, state, contact):
+        if not log:  # opened at the first frame: a resumed run's loop has cut the file back to its checkpoint by then
+            log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
+        log["csv"].write(*test.row(state, contact, min(path_.current, len(stages) - 1), density))
+
+    duration = float(sum(s.max_time for s in stages))
+    try:
+        result = simulate(scene, integrator, out_dir, duration=duration, every=cfg["output"]["every"],
+                          vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x, v0=initial.v,
+                          friction0=initial.friction, resume=resume_here, progress=progress, stop=path_.stop,
+                          control=path_, on_frame=on_frame, frame_csvs=("oedometer.csv",),
+                          volume=lambda t, x: test.area * test.height(t))  # fmt: skip
+    finally:
+        if log:
+            log["csv"].close()
+    records = path_.stage_records()
+    for r in records:
+        if r["end_reason"] not in ("reached", ""):
+            warnings.warn(StageNotReached(f"stage {r['stage']} ({r['target']:g} Pa) ended at its {r['end_reason']} "
+                                          f"with the lid at {r['end_stress']:.4g} Pa"), stacklevel=2)  # fmt: skip
+    rows = read_rows(csv_path)
+    figures = oedometer_figures(records, rows)
+    title = f"{scene.n_grains} grains, E = {scene.material.E:.3g} Pa, {integrator.name}"
+    plot_oedometer(rows, turning_points(records), out_dir / "oedometer.png", title, test.area)
+    summary = run_summary("oedometer", scene, result, t_start)
+    summary.update(figures)
+    summary["stages"] = records
+    summary["lid_start_height"] = test.height0
+    summary["lid_area"] = test.area
+    summary["grain_size"] = test.grain_size
+    summary["initial_state"] = str(path)
+    summary["config_fingerprint"] = identity.fingerprint
+    write_json(out_dir / "summary.json", summary)
+    return summary

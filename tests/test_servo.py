@@ -1,0 +1,199 @@
+"""Stress-controlled walls (model/servo.py, contact.walls.ServoMotion) and load paths whose stages
+end on a condition (driver/stages.py).
+
+The control law is checked against its closed form on a spring behind a contact layer, then the
+whole loop on a grain pressed between the floor and a servo lid, with flexible grains
+(implicit) and rigid ones (both integrators): each stage ends at its target within 1 %, at rest,
+overshooting by at most 5 %, and the contacts' Love-Weber stress agrees with the lid's."""
+
+import json
+
+import numpy as np
+import pytest
+
+from vemdem.analysis.microstructure import love_weber_stress
+from vemdem.contact.defaults import default_contact_laws
+from vemdem.contact.walls import PlaneWall, ServoMotion
+from vemdem.driver.stages import LoadPath, Stage
+from vemdem.geometry import cube
+from vemdem.model.scene import Scene
+from vemdem.model.servo import RAMP, STIFFNESS_RANGE, Servo
+from vemdem.solver.api import SolverOptions, make_integrator
+from vemdem.solver.state import RunStats
+from vemdem.vem.material import Material
+
+SIZE = 1e-3
+
+
+# ---------------------------------------------------------------- the steered path
+def test_a_steered_path_is_continuous_and_remembers_its_last_segment():
+    m = ServoMotion((0.0, 0.0, -2.0))
+    assert np.allclose(m.axis, [0, 0, -1])
+    m.steer(0.0, 1e-3)
+    m.steer(0.5, -2e-3)  # 0.5 mm down by now, then back up at 2 mm/s
+    assert np.allclose(m.displacement(0.5), [0, 0, -5e-4], rtol=0, atol=1e-18)
+    assert np.allclose(m.displacement(0.75), [0, 0, -5e-4 + 5e-4], atol=1e-18)
+    assert np.allclose(m.displacement(0.25), [0, 0, -2.5e-4], atol=1e-18)  # the segment before the steering
+    assert np.allclose(m.velocity(0.25), [0, 0, -1e-3])
+    assert np.allclose(m.velocity(0.6), [0, 0, 2e-3])
+    h = 1e-7
+    assert np.allclose((m.displacement(0.6 + h) - m.displacement(0.6 - h)) / (2 * h), m.velocity(0.6))
+
+
+def test_a_steered_path_goes_through_a_checkpoint_to_the_bit():
+    m = ServoMotion((0.0, 0.0, -1.0))
+    for k, s in enumerate(np.random.default_rng(3).normal(size=20)):
+        m.steer(0.1 * k + 1e-3 * s**2, 1e-3 * s)
+    copy = ServoMotion((0.0, 0.0, -1.0))
+    copy.carry_on(json.loads(json.dumps(m.carried())))
+    for t in (1.7, 1.95, 2.3):
+        assert np.array_equal(copy.displacement(t), m.displacement(t))
+    assert copy.version == m.version
+
+
+def test_a_steered_path_refuses_a_non_finite_speed():
+    with pytest.raises(ValueError, match="non-finite speed"):
+        ServoMotion((0.0, 0.0, 1.0)).steer(0.0, float("nan"))
+
+
+# ---------------------------------------------------------------- the control law
+class SpringBehindLayer:
+    """A wall on a contact layer of stiffness K in series with a sample of stiffness k_s: N =
+    k_eff travel, k_eff = K k_s / (K + k_s); the servo sees the layer's K (ContactModel.wall_stiffness)."""
+
+    wall_names = ["lid"]
+
+    def __init__(self, K, k_s):
+        self.K, self.k_eff = K, K * k_s / (K + k_s)
+
+    def wall_stiffness(self, ints, floats):
+        return np.array([self.K])
+
+
+def _servo_steps(K, k_s, gain, target_force, steps, h=1e-4):
+    contact = SpringBehindLayer(K, k_s)
+    lid = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
+    servo = Servo(contact, lid, 1.0, gain=gain, target=target_force)
+    forces = []
+    for n in range(1, steps + 1):
+        t = n * h
+        force = contact.k_eff * servo.travel_at(t)
+        servo.measure(np.array([[0.0, 0.0, force]]), None, None, t)
+        lid.motion.steer(t, servo.speed(h))
+        forces.append(force)
+    return np.array(forces)
+
+
+@pytest.mark.parametrize("ratio", [1.0, 0.05, 1e-3])
+def test_the_force_error_shrinks_by_one_minus_gain_per_step_on_a_linear_sample(ratio):
+    """Closed form: with N = k_eff d and the wall moved by gain e / k per step, k the last step's
+    secant dN/dd = k_eff (the layer's K where the secant is below K / STIFFNESS_RANGE), the error
+    e_n = target - N_n obeys e_(n+1) = (1 - gain k_eff / k) e_n once it is below RAMP N_n (above,
+    the force grows by gain RAMP of itself per step): never past the target."""
+    K, gain, target = 1e6, 0.3, 2.0
+    k_eff = K * ratio
+    k_s = k_eff * K / (K - k_eff) if ratio < 1 else 1e30
+    forces = _servo_steps(K, k_s, gain, target, 400)
+    err = target - forces
+    q = 1 - gain
+    linear = (err[1:-1] < RAMP * forces[1:-1]) & (err[1:-1] > 1e-9 * target)  # from the second step (a secant)
+    assert linear.sum() >= 10
+    assert np.allclose((err[2:] / err[1:-1])[linear], q, rtol=1e-6)
+    ramp = (err[1:-1] > RAMP * forces[1:-1]) & (forces[1:-1] > 0)
+    if ramp.any():
+        assert np.allclose((forces[2:] / forces[1:-1])[ramp], 1 + gain * RAMP, rtol=1e-6)
+    assert forces.max() <= target
+
+
+def test_a_sample_softer_than_the_range_is_driven_by_the_layers_law_and_never_overshoots():
+    """A secant below K / STIFFNESS_RANGE is taken for the sample's own motion: the wall then moves
+    by gain e / K per step, so the force grows monotonically and stays below the target."""
+    forces = _servo_steps(1e6, 1e6 * 1e-6, 0.3, 2.0, 200)
+    assert np.all(np.diff(forces[1:]) > 0) and forces.max() < 2.0
+
+
+def test_without_contact_the_wall_moves_at_its_speed_cap_towards_the_grains():
+    lid = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
+    servo = Servo(SpringBehindLayer(0.0, 1.0), lid, 1.0, max_speed=3e-3, target=100.0)
+    servo.measure(np.zeros((1, 3)), None, None, 0.0)
+    assert servo.speed(1e-4) == 3e-3
+    servo.target = 0.0
+    servo.force = 5.0  # pressed where it should let go: back off at the cap
+    assert servo.speed(1e-4) == -3e-3
+
+
+def test_a_servo_needs_a_steered_wall_and_a_sane_gain():
+    fixed = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), name="lid")
+    with pytest.raises(ValueError, match="prescribed motion"):
+        Servo(SpringBehindLayer(1.0, 1.0), fixed, 1.0)
+    steered = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
+    with pytest.raises(ValueError, match="gain"):
+        Servo(SpringBehindLayer(1.0, 1.0), steered, 1.0, gain=1.5)
+
+
+# ---------------------------------------------------------------- the loop on a grain
+def pressed_cube(grain_model: str, mass_scaling: float):
+    material = Material(90e9, 0.16, 2200.0 * mass_scaling)
+    law, friction = default_contact_laws(SIZE, material.E, material.density, 9.81, 0.3, 0.3)
+    grain = cube(SIZE).translated((0.0, 0.0, 0.5 * law.activation_gap + 0.5 * SIZE))
+    floor = PlaneWall(np.zeros(3), np.array([0.0, 0.0, 1.0]), name="floor")
+    lid_z = float(grain.vertices[:, 2].max()) + 0.5 * law.activation_gap
+    lid = PlaneWall(np.array([0.0, 0.0, lid_z]), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
+    scene = Scene.build([grain], material, law, friction, planes=[floor, lid], gravity=(0.0, 0.0, -9.81),
+                        mass_scaling=mass_scaling, grain_model=grain_model)  # fmt: skip
+    return scene, lid, lid_z
+
+
+def run_path(scene, lid, lid_z, options, stresses, max_time=0.1):
+    area = SIZE * SIZE
+    servo = Servo(scene.contact, lid, area)
+    # the oedometer's cap: the speed that gives an inertia number of 5e-4 at the target
+    density = scene.material.density
+    stages = [Stage(s, max_time, 0.5, max_speed=5e-4 * lid_z * np.sqrt(s / density) / SIZE) for s in stresses]
+    path = LoadPath(servo, stages, lambda st: servo.travel_at(st.t) / lid_z, scene.bodies.lumped,
+                    scene.bodies.vertex_ptr)  # fmt: skip
+    integrator = make_integrator(options, scene)
+    state, stats = integrator.initial_state(), RunStats()
+    ends = []
+
+    def on_step(st, info, h):
+        before = path.current
+        path(st, info)
+        if path.current > before:  # a stage just ended: the contacts' stress there
+            records = info.contact.records(scene.contact.all_positions(st.x, st.t))
+            volume = area * (lid_z - servo.travel_at(st.t))
+            sigma = love_weber_stress(records.a, records.b, records.point, records.force,
+                                      scene.grain_centroids(st.x), volume)  # fmt: skip
+            ends.append(sigma[2, 2])
+
+    t_end = 0.0
+    while not path.done and t_end < len(stresses) * max_time:
+        t_end += 0.01
+        state, stats = integrator.advance(state, t_end, on_step, stats)
+    return path.stage_records(), ends
+
+
+CASES = {
+    "flexible-implicit": ("flexible", SolverOptions(integrator="implicit", dt_max=1e-3), 1.0),
+    "rigid-implicit": ("rigid", SolverOptions(integrator="implicit", dt_max=1e-3), 1.0),
+    "rigid-explicit": ("rigid", SolverOptions(integrator="explicit"), 1e4),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_each_stage_ends_at_its_target_at_rest_and_the_contacts_carry_the_lids_stress(case):
+    model, options, scaling = CASES[case]
+    scene, lid, lid_z = pressed_cube(model, scaling)
+    # about 45 and 180 grain weights (times the scaling) on the lid, then back
+    weight = float(scene.bodies.body_mass[0]) * 9.81
+    stresses = [x * weight / SIZE**2 for x in (45.0, 180.0, 45.0)]
+    records, love_weber = run_path(scene, lid, lid_z, options, stresses)
+    assert [r["end_reason"] for r in records] == ["reached"] * 3, records
+    for r, sigma_zz in zip(records, love_weber):
+        assert abs(r["end_stress"] - r["target"]) <= 0.01 * r["target"]
+        assert r["overshoot"] <= 0.05
+        assert r["unbalanced"] <= 0.01
+        # the floor carries the grain's weight too: half of it counts at the grain's centre
+        assert sigma_zz == pytest.approx(r["end_stress"], rel=0.05)
+    assert records[0]["loading"] and records[1]["loading"] and not records[2]["loading"]
+    assert records[1]["end_strain"] > max(records[0]["end_strain"], records[2]["end_strain"])
