@@ -19,6 +19,11 @@ CONFIGS = {
     "lid_compression": {"scenario": "lid_compression", "pack": PACK, "output": {"vtk": False},
                         "settle": {"kinetic_threshold": 1e-2},
                         "lid": {"start": 4.0e-3, "end": 3.2e-3, "speed": 0.08, "frames": 4}},
+    # a load path cut inside a stage: the servo's path and the stage records go through the checkpoint
+    "oedometer": {"scenario": "oedometer", "pack": PACK, "settle": {"kinetic_threshold": 1e-2},
+                  "output": {"every": 2e-3, "vtk": False}, "lid": {"gap": 0.01}, "servo": {"inertia_number": 1e-2},
+                  "stages": [{"stress": 200.0, "max_time": 0.02}, {"stress": 400.0, "max_time": 0.01},
+                             {"stress": 200.0, "max_time": 0.01}]},
 }  # fmt: skip
 STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
 
@@ -48,6 +53,8 @@ def _same_results(a, b):
         for name in STAGE_FILES:
             mine = b / stage.relative_to(a) / name
             assert mine.read_bytes() == (stage / name).read_bytes(), f"{stage.relative_to(a) / name} differs"
+    if (a / "oedometer.csv").is_file():
+        assert (b / "oedometer.csv").read_bytes() == (a / "oedometer.csv").read_bytes(), "oedometer.csv differs"
     s1, s2 = (json.loads((d / "summary.json").read_text()) for d in (a, b))
     for key in ("wall_seconds", "wall_seconds_total", "initial_state"):
         s1.pop(key), s2.pop(key)
