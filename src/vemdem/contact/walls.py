@@ -103,10 +103,9 @@ class ServoMotion:
     def active(self, t: float) -> bool:
         return True
 
-    @property
-    def position(self) -> float:
-        """The wall's travel along its axis at the current anchor t0 (m)."""
-        return float(self.d0 @ self.axis)
+    def travel(self, t: float) -> float:
+        """How far the wall has moved along its axis by time t (m)."""
+        return float(self.displacement(t) @ self.axis)
 
     def steer(self, t: float, speed: float) -> None:
         """From t on, move at `speed` (m/s) along the axis (negative: against it)."""

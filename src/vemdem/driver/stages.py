@@ -78,7 +78,7 @@ class LoadPath:
     at_end: object = None  # at_end(state, info) -> dict: what the test measures where a stage ends
     current: int = 0
     records: list = field(default_factory=list)
-    _last: tuple | None = None  # (t, travel, force) at the last step: the work's trapezoid
+    _last: tuple | None = None  # (travel, force) at the last step: the work's trapezoid
 
     def __post_init__(self):
         if not self.stages:
@@ -116,17 +116,16 @@ class LoadPath:
             self.current += 1
             if not self.done:
                 self._enter(self.current)
-        h = state.t - servo.motion.t0
-        servo.motion.steer(state.t, servo.speed(h))
+        servo.steer(state.t)
         rec.largest_speed = max(rec.largest_speed, abs(servo.motion.speed))
 
     def _book(self, rec: StageRecord, state, info) -> None:
         servo = self.servo
         travel = servo.travel_at(state.t)
         if self._last is not None:
-            t0, travel0, force0 = self._last
+            travel0, force0 = self._last
             rec.work += 0.5 * (force0 + servo.force) * (travel - travel0)
-        self._last = (state.t, travel, servo.force)
+        self._last = (travel, servo.force)
         rec.steps += 1
         rec.newton_iterations += int(info.iterations)
         past = (servo.stress - rec.target) if rec.loading else (rec.target - servo.stress)

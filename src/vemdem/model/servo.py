@@ -96,16 +96,19 @@ class Servo:
             return float(np.sign(error) * self.max_speed)
         return float(np.clip(self.gain * error / (self.stiffness * h), -self.max_speed, self.max_speed))
 
+    def steer(self, t: float) -> None:
+        """Set the speed for the step after time t from the last measurement (the step just taken
+        began where the path was last steered)."""
+        self.motion.steer(t, self.speed(t - self.motion.t0))
+
     def __call__(self, state, info) -> None:
         """The time loop's control hook: measure at the accepted state, steer for the next step."""
         self.measure(info.wall_reactions, info.ints, info.floats, state.t)
-        h = state.t - self.motion.t0
-        self.motion.steer(state.t, self.speed(h))
+        self.steer(state.t)
 
     def travel_at(self, t: float) -> float:
         """How far the wall has moved towards the grains by time t (m)."""
-        return float(self.motion.displacement(t) @ self.motion.axis)
-
+        return self.motion.travel(t)
 
     def carried(self) -> dict:
         """The path and the secant's last point, exactly, for a checkpoint."""

@@ -44,6 +44,7 @@ from ..driver.stages import LoadPath, Stage, unbalanced_force
 from ..driver.summary import run_summary
 from ..geometry.mass import body_volumes
 from ..io.results import CsvLog, write_json
+from ..model.bodies import equivalent_diameters
 from ..model.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
@@ -66,8 +67,7 @@ class Oedometer:
         self.box, self.floor, self.centre = tuple(meta["box"]), float(meta["floor"]), tuple(meta["centre"])
         self.area = cfg["lid"]["area"] or self.box[0] * self.box[1]
         self.grains = initial.grains
-        sizes = np.array([g.volume for g in initial.grains])
-        self.grain_size = float(np.mean(np.cbrt(6.0 * sizes / np.pi)))
+        self.grain_size = float(np.mean(equivalent_diameters(np.array([g.volume for g in initial.grains]))))
         top = float(initial.x[:, 2].max())
         self.height0 = top - self.floor + cfg["lid"]["gap"] * self.grain_size
         lid = PlaneWall(np.array([self.centre[0], self.centre[1], self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
@@ -85,7 +85,7 @@ class Oedometer:
 
     # ------------------------------------------------------------------ measures
     def height(self, t: float) -> float:
-        return self.height0 - float(self.lid.motion.displacement(t) @ self.lid.motion.axis)
+        return self.height0 - self.lid.motion.travel(t)
 
     def strain(self, state) -> float:
         return 1.0 - self.height(state.t) / self.height0
