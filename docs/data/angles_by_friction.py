@@ -1,4 +1,5 @@
-"""The angle of repose against the friction coefficient, by method and grain shape (issue 17).
+"""The angle of repose against the friction coefficient, by method and grain shape
+(docs/validation.md, "Angle of repose").
 
     python docs/data/angles_by_friction.py [OUT.png]
 
@@ -6,8 +7,8 @@ Reads the CSVs beside this file (each row one run, rigid grains at the real dens
 corner500_seeds.csv and corner500_angular.csv (`vemdem sweep` of the 500-grain corner collapse
 over packs) and standard_tests_rigid.csv (the 500-grain corner poured heap over packs, and the
 long tilting box: 480 grains of 1 mm in a 30 mm box with mirror sides, the surface after the
-avalanche; the 10 mm box's rows are left out: docs/results.md says why its scatter makes it no
-angle to compare).
+avalanche; the 10 mm box's rows are left out: docs/validation.md, "The tilting box", says why its
+scatter makes it no angle to compare).
 Plots, per method and shape, each pack's angle (small markers) and the mean with the sample
 standard deviation over packs (error bars) against mu_s, with the dry quartz sand band of
 experiments (30-35 deg, Al-Hashemi & Al-Amoudi 2018). Writes docs/img/angles_by_friction.png by

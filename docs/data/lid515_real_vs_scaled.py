@@ -1,13 +1,15 @@
-"""The lid cycle on the 515-grain 6 mm pack: the real density against mass scaling 1e6 (issue 14).
+"""The lid cycle on the 515-grain 6 mm pack: the real density against mass scaling 1e6
+(docs/validation.md, "Real density against mass scaling").
 
     python docs/data/lid515_real_vs_scaled.py [OUT.png]
 
 Reads the two `force_strain.csv` files beside this file (`phase,strain,force`, as
 `lid_compression` writes them): lid515_real.csv, the paper's own method (flexible VEM grains,
-implicit Newmark, the real density; a run resumed over sessions, so its curve may stop before
-the cycle's end), and lid515_scaled.csv, the `paper-compression` example's method (explicit,
-mass scaling 1e6), both from session 33's rigid-grain pack (`/work/s33/rpack` on the development
-machine: `paper-pack` with `[model] grains = "rigid"` and `mass_scaling = 1`). The force is drawn
+implicit Newmark, the real density; a run resumed over several parts, whose loading stops at 29 %
+strain), and lid515_scaled.csv, the `paper-compression` example's method (explicit, mass scaling
+1e6), both from one rigid-grain pack (`paper-pack` with `[model] grains = "rigid"` and
+`mass_scaling = 1`; `python benchmarks/bench_paper.py --only compression-pack --pack-state
+rpack/state.npz --no-vtk [--implicit]`). The force is drawn
 in pack weights, 515 grains' weight at each run's density (PACK_WEIGHT_N below, times 1e6 for the
 mass-scaled run), since mass scaling multiplies the weight and the contact law's force scale
 together: in those units the two runs share one law. Writes docs/img/lid515_real_vs_scaled.png by

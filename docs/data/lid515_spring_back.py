@@ -1,11 +1,11 @@
 """What the 515-grain pack gives back when the lid turns: the real density against mass scaling 1e6
-(issue 14; docs/results.md, "What the spring-back is made of").
+(docs/validation.md, "What the spring-back is made of").
 
     python docs/data/lid515_spring_back.py [OUT.png]
 
 Reads lid515_spring_back.csv beside this file: for the cycles turned at 20, 22 and 24 % strain
-(each method's run of "Cycles turned before the jam", rerun in session 42 from a rigid pack settled
-that day), the best-fit vertical strain of the grains' branch vectors from the lid's turn to where the
+(each method's run of "Cycles turned before the jam", rerun from another rigid pack of the same
+config: `bench_paper.py ... --lid-turn 0.20|0.22|0.24 [--implicit]`), the best-fit vertical strain of the grains' branch vectors from the lid's turn to where the
 lid lets go of the pack (`to` = release: the first frame whose force is at most 0.01 pack weights)
 and to the cycle's end (`to` = end, what summary.json's `spring_back` reports), split by
 vemdem.analysis.spring_back into the grains' deformation, the contact layer's gaps, the contacts'

@@ -1,13 +1,15 @@
 """Whole lid cycles on the 515-grain 6 mm pack, turned before the jam: the real density against
-mass scaling 1e6 (issue 14; docs/results.md, "Cycles turned before the jam").
+mass scaling 1e6 (docs/validation.md, "Cycles turned before the jam").
 
     python docs/data/lid515_turned.py [OUT.png]
 
 Reads the `force_strain.csv` files beside this file (`phase,strain,force`, as `lid_compression`
 writes them): lid515_turn{NN}_real.csv, the paper's own method (flexible VEM grains, implicit
 Newmark, the real density), and lid515_turn{NN}_scaled.csv, the `paper-compression` example's
-method (explicit, mass scaling 1e6), both from session 33's rigid-grain pack, the lid from 7 mm
-at 0.02 m/s down to a strain of NN % and back (`[lid] end`). The force is in pack weights, as in
+method (explicit, mass scaling 1e6), both from the rigid-grain pack of lid515_real_vs_scaled.py,
+the lid from 7 mm at 0.02 m/s down to a strain of NN % and back (`[lid] end`; `python
+benchmarks/bench_paper.py --only compression-pack --pack-state rpack/state.npz --no-vtk --lid-turn
+0.NN [--implicit]`). The force is in pack weights, as in
 lid515_real_vs_scaled.py (whose PACK_WEIGHT_N this reads), the works in pack weights times the
 lid's 7 mm start height, the residual strain at one force for both (RESIDUAL_PACK_WEIGHTS).
 Writes docs/img/lid515_turned.png by default and prints each cycle's figures.
