@@ -1,5 +1,5 @@
 """The grain-block coarse matrix (6 x 6 blocks per body and per coupled pair): dense LAPACK LU
-against SuperLU, build + factorise + one solve, against the number of bodies (issue 14).
+against SuperLU, build + factorise + one solve, against the number of bodies (docs/linear-solvers.md).
 
     python benchmarks/bench_coarse.py [--bodies 16,24,40,64,100,150] [--neighbours 3] [--repeat 50]
 

@@ -1,4 +1,5 @@
-"""Dynamics throughput: both integrators on settling packs of sand grains in a box (issue 4).
+"""Dynamics throughput: both integrators on settling packs of sand grains in a box
+(docs/dynamics-benchmark.md).
 
     python benchmarks/bench_dynamics.py [--quick] [--grains 64,515,4096] [--integrator implicit|explicit|both]
                                         [--steps-implicit 20] [--steps-explicit 500] [--impact-steps 0,20]

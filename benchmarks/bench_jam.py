@@ -1,5 +1,5 @@
 """The lid's jam stepped for a wall-time budget from a saved lid state, with Newton's or the step
-control's settings changed: which of them buys the jam's pace (issue 14).
+control's settings changed: which of them buys the jam's pace (docs/design-notes.md).
 
     python benchmarks/bench_jam.py [--state benchmarks/data/lid515_jam.npz] [--seconds 1200] [--steps N]
                                    [--dt 1e-6] [--set solver.max_iterations=30] [--newton line_search=true]
@@ -16,8 +16,8 @@ the state's positions, velocities and history (the acceleration solved afresh) i
 accepted steps, and prints: simulated time, its pace (simulated seconds per wall second), steps
 accepted and rejected by cause, Newton iterations per step, Krylov iterations per Newton
 iteration, the steps' range and the lid's force. Two settings are compared by running both from
-the same state, side by side, with the same threads: docs/results.md ("Newton's options in the
-515-grain jam"). Nothing asserts a timing.
+the same state, side by side, with the same threads (docs/design-notes.md, "Newton and the
+implicit step"). Nothing asserts a timing.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""GMRES iterations on one Newton matrix under other coarse spaces than the shipped one (issue 14).
+"""GMRES iterations on one Newton matrix under other coarse spaces than the shipped one
+(docs/linear-solvers.md).
 
     python benchmarks/bench_krylov.py [--state benchmarks/data/lid515_jam.npz] [--dt 1e-5,1e-6,1e-4]
 

@@ -4,7 +4,7 @@
 
 Prints, per mass scaling and integrator: the grain's vibration period over the contact duration
 (Scene.vibration_contact_ratio), the restitution of the centres' velocities, the kinetic energy
-kept (vibration included), steps and wall time. Results: docs/results.md (mass scaling).
+kept (vibration included), steps and wall time. Results: docs/validation.md (mass scaling).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""One implicit Newton iteration, split by piece, against the number of grains (issue 14).
+"""One implicit Newton iteration, split by piece, against the number of grains (docs/performance.md).
 
     python benchmarks/bench_newton.py [--grains 515,4096] [--dt 1e-4,1e-3] [--state PATH/state.npz]
                                       [--tile 1x1,2x4,4x8] [--step] [--quiet SECONDS]
@@ -136,7 +136,7 @@ def run_case(config: Path, checkpoint: Path):
 # faulting pages at once are slow: the element kernel took 52-57 ms in its 2nd-4th calls and 6 ms
 # from the 5th on, on 2 threads (1 thread: 15 -> 11 ms). A run pays it in its first steps only: 13
 # of 371 element calls over 40 steps of the lid jam took about 53 ms, one of them in the last 20
-# (session 68, docs/linear-solvers.md)
+# (docs/performance.md)
 WARMUP = 4
 
 

@@ -3,7 +3,7 @@
     python benchmarks/bench_paper.py                 # the paper's configs (hours on 2 cores)
     python benchmarks/bench_paper.py --grains 16     # the same configs with fewer grains (minutes)
     python benchmarks/bench_paper.py --only pack,high --out runs/
-    python benchmarks/bench_paper.py --implicit --no-vtk --out real/     # the real-density runs (issue 14)
+    python benchmarks/bench_paper.py --implicit --no-vtk --out real/     # the real-density runs
     python benchmarks/bench_paper.py --implicit --only mid --pack-state rpack/state.npz
     python benchmarks/bench_paper.py --implicit --only compression-pack --lid-turn 0.22 --pack-state rpack/state.npz
     python benchmarks/bench_paper.py --implicit --only compression-pack --set solver.max_iterations=30 ...
@@ -11,19 +11,19 @@
 Each run is the `paper-*` example run through the library as `vemdem run` would, in OUT/<name>;
 `compression-pack` is `paper-compression` started from the pack (the paper's own setup: the lid
 cycle on the 515-grain, 6 mm pack). The collapses and `compression-pack` start from OUT/pack/state.npz,
-or from `--pack-state` (docs/results.md times the real-density collapses from a rigid-grain pack
+or from `--pack-state` (docs/validation.md times the real-density collapses from a rigid-grain pack
 settled at the real density: `paper-pack` with `[model] grains = "rigid"` and `mass_scaling = 1`).
 `--implicit` runs the `paper-*-implicit` examples instead: the paper's own method, implicit Newmark
 at the real density, with no mass scaling. `--no-vtk` leaves the frames out (the docs' wall times).
 `--lid-turn E` turns the lids at compressive strain E of their start height instead of the paper's
-4.9 mm (docs/results.md, "Cycles turned before the jam"). `--set KEY=VALUE` changes one config value of
-every run (the step control's budget of docs/results.md: `--set solver.max_iterations=30
+4.9 mm (docs/validation.md, "Cycles turned before the jam"). `--set KEY=VALUE` changes one config value of
+every run (the step control's budget of docs/design-notes.md: `--set solver.max_iterations=30
 --set solver.easy_iterations=16`).
 A run whose summary.json already exists is read, not rerun (so an interrupted sweep goes on
 where it stopped; an interrupted run itself resumes from its checkpoint). Prints one row per run:
 grains, simulated time, accepted steps, wall seconds, steps/s, grain-steps/s and the run's
 headline figures, and the ratio of each wall time to its target: 2 hours for the mass-scaled runs
-(issue 5), 1 hour at the real density (issue 14, whose goal is 10 minutes).
+and 1 hour at the real density (the goal there: 10 minutes).
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ def main(argv=None) -> None:
                    help="the paper-*-implicit examples: implicit Newmark at the real density, no mass scaling")
     p.add_argument("--pack-state", type=Path,
                    help="start the collapses and compression-pack from this state.npz [OUT/pack/state.npz]")
-    p.add_argument("--no-vtk", action="store_true", help="write no VTK frames (the wall times of docs/results.md)")
+    p.add_argument("--no-vtk", action="store_true", help="write no VTK frames (the wall times of docs/validation.md)")
     p.add_argument("--lid-turn", type=float, metavar="E",
                    help="turn the lids at compressive strain E (0 < E < 1) of their start height [the paper's 4.9 mm]")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

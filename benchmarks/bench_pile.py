@@ -4,10 +4,10 @@
     python benchmarks/bench_pile.py --dt-max 1e-3    # the implicit run with a larger step cap too
     python benchmarks/bench_pile.py --out runs/ --keep
 
-Issue 14's target: "the README's pile, run implicitly at the real density, at most twice the wall
-time of the shipped mass-scaled explicit run (goal: no slower)". The pile is the README's main job
-of that time (24 sand grains of 16 vertices, 1.45 mm, settled in a 5.2 mm box at mu 0.9/0.8, then
-its walls removed); the main job has since become the 160-grain corner collapse of rigid grains.
+The target: a small pile run implicitly at the real density in at most twice the wall time of
+the mass-scaled explicit run (goal: no slower). The pile is 24 sand grains of 16 vertices, 1.45 mm,
+settled in a 5.2 mm box at mu 0.9/0.8, then its walls removed (the README's main job is the
+160-grain corner collapse of rigid grains).
 Both runs go through the library as `vemdem run` would, pack stage and collapse, after a short
 warm-up that compiles every kernel they use, so the wall times compare integrators, not
 compilers. Prints one row per run and the ratio of each run's wall time to the explicit one. The
@@ -32,7 +32,7 @@ from pathlib import Path
 from vemdem.config.build import MassScalingWarning
 from vemdem.scenarios.registry import checked_config
 
-PILE = {  # examples/pile.toml at 36f55cf (2026-11-23), the pile of issue 14's measurements
+PILE = {  # a 24-grain pile (docs/performance.md, "The small pile")
     "scenario": "pile_collapse",
     "pack": {"n_grains": 24, "seed": 1, "mu_s": 0.9, "mu_d": 0.8, "grains": {"size": 1.45e-3, "vertices": 16},
              "box": {"width": 5.2e-3, "depth": 5.2e-3}},  # fmt: skip

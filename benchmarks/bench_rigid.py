@@ -1,4 +1,4 @@
-"""Rigid grains, explicit: the cost of one step and of its pieces on a settled pack (issue 16).
+"""Rigid grains, explicit: the cost of one step and of its pieces on a settled pack (docs/performance.md).
 
     python benchmarks/bench_rigid.py [--config CONFIG.toml] [--state STATE.npz] [--out DIR]
                                      [--steps 1000] [--threads N] [--json PATH]
@@ -16,7 +16,7 @@ grain pairs' feature lists (contact/feature_list.py) were rebuilt per step, and 
 step, each timed on its own at the end state: the contact search (broad phase), the narrow phase
 (the full search `find_contacts`, and the feature list with every list kept), the contact
 forces, the rigid kinematics (free rotation, vertex placement and velocities) and the step limits.
-The reference point of issue 16: rigid polyhedra in other DEM codes cost about 0.3 CPU-s per
+The reference point: rigid polyhedra in other DEM codes cost about 0.3 CPU-s per
 step for a 515-grain dense pack (600-1,600 grain-steps per CPU-second). Nothing here asserts a
 timing.
 """
@@ -159,7 +159,7 @@ def main(argv=None) -> None:
           f"{r['ms_per_step']:.2f} ms per step")  # fmt: skip
     print(f"  {r['grain_steps_per_s']:,.0f} grain-steps/s, {r['grain_steps_per_cpu_s']:,.0f} per CPU-second "
           f"({r['grain_steps_per_cpu_s'] / 1600:.0f}-{r['grain_steps_per_cpu_s'] / 600:.0f}x the 600-1,600 of "
-          "rigid polyhedra elsewhere, issue 16)")  # fmt: skip
+          "rigid polyhedra in other DEM codes)")  # fmt: skip
     print(f"  feature list: {r['feature_list_builds_per_step']:.1f} grain-pair lists rebuilt per step of "
           f"{r['candidate_grain_pairs']} candidate grain pairs")  # fmt: skip
     print("  pieces, ms per call at the end state:")

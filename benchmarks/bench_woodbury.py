@@ -1,5 +1,5 @@
 """The grain-block solver's rotated-block Woodbury path against every block's LU, by the number of
-dofs the contacts touch per grain (issue 14; solver/linear/woodbury.py).
+dofs the contacts touch per grain (docs/linear-solvers.md; solver/linear/woodbury.py).
 
     python benchmarks/bench_woodbury.py [--grains 515] [--vertices 30] [--touched 0,12,21,33,39,48,60] [--repeat 7]
 
