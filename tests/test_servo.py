@@ -17,7 +17,7 @@ from vemdem.contact.walls import PlaneWall, ServoMotion
 from vemdem.driver.stages import LoadPath, Stage
 from vemdem.geometry import cube
 from vemdem.model.scene import Scene
-from vemdem.model.servo import RAMP, STIFFNESS_RANGE, Servo
+from vemdem.model.servo import RAMP, SEATING, STIFFNESS_RANGE, Servo
 from vemdem.solver.api import SolverOptions, make_integrator
 from vemdem.solver.state import RunStats
 from vemdem.vem.material import Material
@@ -70,10 +70,13 @@ class SpringBehindLayer:
         return np.array([self.K])
 
 
-def _servo_steps(K, k_s, gain, target_force, steps, h=1e-4):
+def _servo_steps(K, k_s, gain, target_force, steps, h=1e-4, cap_share=0.08):
+    """The forces after each step. The speed cap moves the force by cap_share of the target per
+    step: 0.08 seats the wall in two steps and never binds the law after (gain RAMP < 0.08)."""
     contact = SpringBehindLayer(K, k_s)
     lid = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
-    servo = Servo(contact, lid, 1.0, gain=gain, target=target_force)
+    cap = cap_share * target_force / (contact.k_eff * h)
+    servo = Servo(contact, lid, 1.0, gain=gain, target=target_force, max_speed=cap)
     forces = []
     for n in range(1, steps + 1):
         t = n * h
@@ -89,7 +92,8 @@ def test_the_force_error_shrinks_by_one_minus_gain_per_step_on_a_linear_sample(r
     """Closed form: with N = k_eff d and the wall moved by gain e / k per step, k the last step's
     secant dN/dd = k_eff (the layer's K where the secant is below K / STIFFNESS_RANGE), the error
     e_n = target - N_n obeys e_(n+1) = (1 - gain k_eff / k) e_n once it is below RAMP N_n (above,
-    the force grows by gain RAMP of itself per step): never past the target."""
+    the force grows by gain RAMP of itself per step, and below SEATING of the target by the speed
+    cap's step): never past the target."""
     K, gain, target = 1e6, 0.3, 2.0
     k_eff = K * ratio
     k_s = k_eff * K / (K - k_eff) if ratio < 1 else 1e30
@@ -99,10 +103,22 @@ def test_the_force_error_shrinks_by_one_minus_gain_per_step_on_a_linear_sample(r
     linear = (err[1:-1] < RAMP * forces[1:-1]) & (err[1:-1] > 1e-9 * target)  # from the second step (a secant)
     assert linear.sum() >= 10
     assert np.allclose((err[2:] / err[1:-1])[linear], q, rtol=1e-6)
-    ramp = (err[1:-1] > RAMP * forces[1:-1]) & (forces[1:-1] > 0)
+    ramp = (err[1:-1] > RAMP * forces[1:-1]) & (forces[1:-1] >= SEATING * target)
     if ramp.any():
         assert np.allclose((forces[2:] / forces[1:-1])[ramp], 1 + gain * RAMP, rtol=1e-6)
     assert forces.max() <= target
+
+
+def test_a_wall_seats_at_its_speed_cap_until_it_carries_a_tenth_of_its_target():
+    """Below SEATING of the target force the sample does not resist yet (a loose pack under a
+    lid): the wall closes at its cap, then the force law takes over and never passes the target."""
+    K, h, target = 1e6, 1e-4, 2.0
+    forces = _servo_steps(K, 1e30, 0.3, target, 200, h, cap_share=0.01)
+    steps = np.diff(np.concatenate([[0.0], forces]))
+    n = int(np.argmax(forces >= SEATING * target))  # the first step that ends at or above SEATING of the target
+    assert forces[0] == 0.0  # the first measurement, before any travel
+    assert n >= 9 and np.allclose(steps[1 : n + 1], 0.01 * target, rtol=1e-9)
+    assert forces.max() <= target and target - forces[-1] < 1e-6 * target
 
 
 def test_a_sample_softer_than_the_range_is_driven_by_the_layers_law_and_never_overshoots():

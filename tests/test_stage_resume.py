@@ -4,6 +4,7 @@ continued with resume=True ends with the files of a run that was never interrupt
 
 import json
 
+import numpy as np
 import pytest
 
 from vemdem.config import ConfigError
@@ -19,10 +20,11 @@ CONFIGS = {
     "lid_compression": {"scenario": "lid_compression", "pack": PACK, "output": {"vtk": False},
                         "settle": {"kinetic_threshold": 1e-2},
                         "lid": {"start": 4.0e-3, "end": 3.2e-3, "speed": 0.08, "frames": 4}},
-    # a load path cut inside a stage: the servo's path and the stage records go through the checkpoint
-    "oedometer": {"scenario": "oedometer", "pack": PACK, "settle": {"kinetic_threshold": 1e-2},
+    # a load path cut inside a stage, with the lid on the grains: the servo's path and the stage
+    # records go through the checkpoint
+    "oedometer": {"scenario": "oedometer", "pack": {**PACK, "seed": 1}, "settle": {"min_time": 0.04},
                   "output": {"every": 2e-3, "vtk": False}, "lid": {"gap": 0.01}, "servo": {"inertia_number": 1e-2},
-                  "stages": [{"stress": 200.0, "max_time": 0.02}, {"stress": 400.0, "max_time": 0.01},
+                  "stages": [{"stress": 200.0, "max_time": 0.03}, {"stress": 400.0, "max_time": 0.01},
                              {"stress": 200.0, "max_time": 0.01}]},
 }  # fmt: skip
 STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
@@ -67,8 +69,15 @@ def test_a_run_killed_in_either_stage_resumes_to_the_same_bits(tmp_path, monkeyp
     written = _checkpoints(monkeypatch)
     _run(raw, tmp_path / "whole")
     in_pack = written.count("pack")
-    assert in_pack >= 3 and len(written) - in_pack >= 3, written  # both stages have frames to cut between
-    for name, stop_at in (("cut-in-pack", in_pack // 2 + 1), ("cut-in-main", in_pack + 2)):
+    in_main = len(written) - in_pack
+    assert in_pack >= 3 and in_main >= 3, written  # both stages have frames to cut between
+    # the oedometer is cut in its second stage, the lid pressing the grains
+    late = scenario == "oedometer"
+    if late:
+        rows = np.genfromtxt(tmp_path / "whole" / "oedometer.csv", delimiter=",", names=True)
+        cut = in_main * 3 // 4
+        assert rows["stage"][cut - 1] >= 1 and rows["lid_force"][cut - 1] > 0, "the cut must find the lid loaded"
+    for name, stop_at in (("cut-in-pack", in_pack // 2 + 1), ("cut-in-main", in_pack + (cut if late else 2))):
         _checkpoints(monkeypatch, stop_at)
         with pytest.raises(KeyboardInterrupt):
             _run(raw, tmp_path / name)

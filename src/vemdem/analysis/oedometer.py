@@ -13,6 +13,8 @@ lid's work over it):
   unloading began from; where the path has no reloading, over the whole path (a load-unload
   cycle: the area of the paper's force-displacement loop, Fig. 7).
 - residual_strain: the axial strain at the end of the first unloading.
+- love_weber_error_at_turns: the largest relative difference between the contacts' sigma_zz
+  (Love-Weber) and the lid's stress where a stage ended at its target, at rest.
 - max_inertia_number: the largest inertia number over the frames of the loading stages once the
   lid carries its first target (the approach to the pack's top and the seating under the first
   target are excluded, and named so: no stress there to be quasi-static under).
@@ -94,8 +96,17 @@ def oedometer_figures(stages: list[dict], rows: np.ndarray) -> dict:
     out["residual_strain"] = points[first_unload]["end_strain"] if first_unload < len(points) else None
     out["stress_error_at_turns"] = max((abs(p["end_stress"] - p["target"]) / p["target"] for p in points), default=None)
     out["max_overshoot"] = max((p["overshoot"] for p in points), default=None)
+    out["love_weber_error_at_turns"] = _love_weber_error(points)
     out["max_inertia_number"], out["inertia_number_frames"] = _loading_inertia(stages, rows)
     return out
+
+
+def _love_weber_error(points: list[dict]) -> float | None:
+    """The largest |sigma_zz(contacts) / sigma_v(lid) - 1| where a stage ended at its target (at rest):
+    the lid's stress against the one its contacts carry inside the sample (Love-Weber)."""
+    errors = [abs(p["sigma_v_contacts_end"] / p["end_stress"] - 1.0) for p in points
+              if p["end_reason"] == "reached" and p.get("sigma_v_contacts_end") is not None and p["end_stress"] > 0]  # fmt: skip
+    return max(errors) if errors else None
 
 
 def _loading_inertia(stages: list[dict], rows: np.ndarray) -> tuple[float | None, str]:

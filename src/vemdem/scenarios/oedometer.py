@@ -96,7 +96,12 @@ class Oedometer:
         return float(np.mean(force / side_area))
 
     def at_stage_end(self, state, info) -> dict:
-        return {"sigma_h_end": self.sigma_h(info.wall_reactions, state.t)}
+        """The lateral stress and the contacts' sigma_zz (Love-Weber) where a stage ends: at rest, the
+        latter is the lid's stress measured inside the sample."""
+        records = info.contact.records(self.scene.contact.all_positions(state.x, state.t))
+        volume = self.area * self.height(state.t)
+        return {"sigma_h_end": self.sigma_h(info.wall_reactions, state.t),
+                "sigma_v_contacts_end": love_weber_zz(self.scene, state.x, records, volume)}  # fmt: skip
 
     def row(self, state, contact, stage: int, density: float) -> list:
         h = self.height(state.t)

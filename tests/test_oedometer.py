@@ -1,0 +1,82 @@
+"""The oedometer's measures (analysis/oedometer.py) on hand-built stage records whose answers are
+known: a linear-elastic sample with a stiffer unloading branch, and a load-unload cycle whose
+work is a trapezoid."""
+
+import numpy as np
+import pytest
+
+from vemdem.analysis.oedometer import (
+    HEADER,
+    hysteresis_energy,
+    inertia_number,
+    moduli,
+    oedometer_figures,
+    turning_points,
+)
+
+
+def record(stage, target, end_stress, end_strain, work=0.0, loading=True, sigma_h=None, contacts=None,
+           reason="reached", start_stress=0.0, overshoot=0.0):  # fmt: skip
+    r = {"stage": stage, "target": target, "end_stress": end_stress, "end_strain": end_strain, "work": work,
+         "loading": loading, "end_reason": reason, "start_stress": start_stress, "overshoot": overshoot,
+         "unbalanced": 0.001, "end_time": 0.1 * (stage + 1)}  # fmt: skip
+    if sigma_h is not None:
+        r["sigma_h_end"] = sigma_h
+    if contacts is not None:
+        r["sigma_v_contacts_end"] = contacts
+    return r
+
+
+# a sample with constrained modulus M_load = 10 MPa on first loading and M_un = 40 MPa unloading
+# and reloading, K0 = 0.4: the path 25 -> 50 -> 100 kPa, unload to 25, reload to 100
+M_LOAD, M_UN, K0 = 10e6, 40e6, 0.4
+
+
+def elastic_path():
+    eps = {25e3: 25e3 / M_LOAD, 50e3: 50e3 / M_LOAD, 100e3: 100e3 / M_LOAD}
+    top = eps[100e3]
+    back = top - 75e3 / M_UN
+    return [record(0, 25e3, 25e3, eps[25e3], sigma_h=K0 * 25e3, contacts=25e3 * 1.02),
+            record(1, 50e3, 50e3, eps[50e3], sigma_h=K0 * 50e3, contacts=50e3 * 0.97),
+            record(2, 100e3, 100e3, top, sigma_h=K0 * 100e3, contacts=100e3 * 1.01),
+            record(3, 25e3, 25e3, back, loading=False, sigma_h=0.7 * 25e3, contacts=25e3),
+            record(4, 100e3, 100e3, top, sigma_h=K0 * 100e3, contacts=100e3)]  # fmt: skip
+
+
+def test_k0_moduli_and_the_residual_strain_of_an_elastic_path():
+    stages = elastic_path()
+    out = oedometer_figures(stages, np.zeros((0, len(HEADER))))
+    assert out["K0"] == pytest.approx(K0) and out["K0_by_stage"] == pytest.approx([K0] * 3)  # first loading only
+    loading = [m["modulus_Pa"] for m in out["constrained_modulus_loading_Pa"]]
+    assert loading == pytest.approx([M_LOAD, M_LOAD, M_UN])  # 25->50, 50->100, the reloading
+    assert [m["kind"] for m in out["constrained_modulus_loading_Pa"]] == ["virgin", "virgin", "reloading"]
+    assert [m["modulus_Pa"] for m in out["constrained_modulus_unloading_Pa"]] == pytest.approx([M_UN])
+    assert out["residual_strain"] == pytest.approx(100e3 / M_LOAD - 75e3 / M_UN)
+    assert out["love_weber_error_at_turns"] == pytest.approx(0.03)
+    assert out["stress_error_at_turns"] == 0.0
+
+
+def test_the_hysteresis_of_a_cycle_is_the_net_work_of_its_unloading_and_reloading():
+    # unloading gives back 3 mJ, reloading takes 5 mJ: 2 mJ stay in the sample
+    stages = elastic_path()
+    stages[3]["work"], stages[4]["work"] = -3e-3, 5e-3
+    assert hysteresis_energy(turning_points(stages)) == pytest.approx(2e-3)
+    # a load-unload cycle without a reloading: the net work of the whole path
+    cycle = [record(0, 100e3, 100e3, 0.01, work=4e-3), record(1, 1e3, 1e3, 0.006, work=-1.5e-3, loading=False)]
+    assert hysteresis_energy(turning_points(cycle)) == pytest.approx(2.5e-3)
+    assert hysteresis_energy(turning_points(cycle[:1])) is None
+
+
+def test_a_stage_that_did_not_end_is_no_turning_point_and_moduli_skip_a_zero_strain_step():
+    stages = elastic_path()
+    stages[4]["end_reason"] = ""
+    assert [p["stage"] for p in turning_points(stages)] == [0, 1, 2, 3]
+    loading, unloading = moduli(turning_points([record(0, 1e3, 1e3, 0.01), record(1, 2e3, 2e3, 0.01)]))
+    assert loading == [] and unloading == []
+
+
+def test_inertia_number_follows_its_definition():
+    # I = (v / H) d / sqrt(sigma / rho)
+    assert inertia_number(1e-3, 4e-3, 1e-3, 1e5, 2500.0) == pytest.approx(0.25e-3 / np.sqrt(40.0))
+    assert inertia_number(-1e-3, 4e-3, 1e-3, 1e5, 2500.0) == inertia_number(1e-3, 4e-3, 1e-3, 1e5, 2500.0)
+    assert inertia_number(1e-3, 4e-3, 1e-3, 0.0, 2500.0) == np.inf
