@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from vemdem.analysis.microstructure import love_weber_stress
+from vemdem.config import ConfigError
 from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.walls import PlaneWall, ServoMotion
 from vemdem.driver.stages import LoadPath, Stage
 from vemdem.geometry import cube
 from vemdem.model.scene import Scene
 from vemdem.model.servo import RAMP, SEATING, STIFFNESS_RANGE, Servo
+from vemdem.scenarios.registry import checked_config
 from vemdem.solver.api import SolverOptions, make_integrator
 from vemdem.solver.state import RunStats
 from vemdem.vem.material import Material
@@ -213,3 +215,47 @@ def test_each_stage_ends_at_its_target_at_rest_and_the_contacts_carry_the_lids_s
         assert sigma_zz == pytest.approx(r["end_stress"], rel=0.05)
     assert records[0]["loading"] and records[1]["loading"] and not records[2]["loading"]
     assert records[1]["end_strain"] > max(records[0]["end_strain"], records[2]["end_strain"])
+
+
+# ---------------------------------------------------------------- a servo wall in a scene config
+def servo_scene(tmp_path, servo: dict, lid: dict | None = None) -> dict:
+    """A cube on the floor under a plane lid with a `[walls.servo]` table (scene scenario)."""
+    return {"scenario": "scene", "duration": 0.08,
+            "material": {"E": 90e9, "nu": 0.16, "density": 2200.0},
+            "solver": {"integrator": "implicit", "dt_max": 1e-3},
+            "grains": [{"shape": "cube", "size": SIZE, "position": [0.0, 0.0, 0.5 * SIZE + 2e-6]}],
+            "walls": [{"type": "plane", "name": "floor"},
+                      {"type": "plane", "name": "lid", "point": [0.0, 0.0, SIZE + 4e-6], "normal": [0.0, 0.0, -1.0],
+                       **(lid or {}), "servo": servo}],
+            "output": {"every": 0.02, "vtk": False}}  # fmt: skip
+
+
+def test_a_scene_wall_with_a_servo_table_follows_its_target_stress(tmp_path):
+    """The scene's lid holds 45 grain weights, then twice that from t = 0.04 s on (a ramp over
+    0.01 s): the walls.csv force at the frames after each is the target stress x area within 1 %."""
+    weight = 2200.0 * SIZE**3 * 9.81
+    s1 = 45 * weight / SIZE**2
+    servo = {"stress": [s1, s1, 2 * s1], "times": [0.0, 0.04, 0.05], "area": SIZE**2, "max_speed": 2e-3}
+    cfg, module = checked_config(servo_scene(tmp_path, servo))
+    module.run(cfg, tmp_path / "run")
+    rows = np.genfromtxt(tmp_path / "run" / "walls.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    lid = rows[rows["wall"] == 1]
+    force = {round(float(t), 3): f for t, f in zip(lid["time"], lid["fz"])}  # the grains push the lid up
+    assert force[0.04] == pytest.approx(s1 * SIZE**2, rel=0.01)
+    assert force[0.08] == pytest.approx(2 * s1 * SIZE**2, rel=0.01)
+
+
+@pytest.mark.parametrize("servo, lid, message", [
+    ({"stress": [1e3], "max_speed": 1e-3}, None, "walls[1].servo.area: required for a servo wall"),
+    ({"stress": [1e3], "area": 1e-6}, None, "walls[1].servo.max_speed: required for a servo wall"),
+    ({"stress": [float("nan")], "area": 1e-6, "max_speed": 1e-3}, None, "walls[1].servo.stress: must be a list of finite numbers"),
+    ({"stress": [-5.0], "area": 1e-6, "max_speed": 1e-3}, None, "cannot pull"),
+    ({"stress": [1e3, 2e3], "area": 1e-6, "max_speed": 1e-3}, None, "one stress per servo.times"),
+    ({"stress": [1e3], "area": 1e-6, "max_speed": 1e-3}, {"times": [0.0, 1.0], "displacements": [[0, 0, 0], [0, 0, -1e-4]]},
+     "walls[1]: a servo wall's motion is steered"),
+])  # fmt: skip
+def test_a_servo_wall_with_bad_keys_is_refused_in_one_line(tmp_path, servo, lid, message):
+    with pytest.raises(ConfigError) as err:
+        cfg, module = checked_config(servo_scene(tmp_path, servo, lid))
+        module.run(cfg, tmp_path / "run")
+    assert message in str(err.value) and "\n" not in str(err.value)

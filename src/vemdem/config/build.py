@@ -10,12 +10,13 @@ from pathlib import Path
 import numpy as np
 
 from ..contact.defaults import default_contact_laws
-from ..contact.walls import Motion, PlaneWall
+from ..contact.walls import Motion, PlaneWall, ServoMotion
 from ..geometry.overlap import first_overlap
 from ..geometry.polyhedron import GeometryError, Polyhedron
 from ..geometry.shapes import cube, l_prism, rotation_matrix, sand_grain, tetrahedron
 from ..io.surfaces import load_mesh_wall, load_surface
 from ..model.scene import Scene
+from ..model.servo import Servo, ServoWalls
 from ..solver.api import SolverOptions
 from ..vem.element import VemOptions
 from ..vem.material import Material
@@ -104,13 +105,52 @@ def _direction(normal: list, key: str) -> np.ndarray:
     return n / largest
 
 
+def _servo_motion(spec: dict, where: str) -> ServoMotion | None:
+    """A servo wall's steered motion along its `normal` (None for a wall without a servo), after the
+    checks a servo's keys need together."""
+    servo = spec["servo"]
+    if not servo["stress"]:
+        return None
+    if len(servo["stress"]) != len(servo["times"]):
+        raise ConfigError(f"{where}.servo.stress: one stress per servo.times ({len(servo['times'])}), "
+                          f"got {len(servo['stress'])}")  # fmt: skip
+    if np.any(np.diff(servo["times"]) <= 0):
+        raise ConfigError(f"{where}.servo.times: must increase")
+    for key in ("area", "max_speed"):
+        if servo[key] is None:
+            raise ConfigError(f"{where}.servo.{key}: required for a servo wall")
+    if len(spec["times"]) > 1 or np.any(spec["displacements"]) or spec["removed_at"] is not None:
+        raise ConfigError(f"{where}: a servo wall's motion is steered by its target stress; remove its "
+                          "times, displacements and removed_at")  # fmt: skip
+    return ServoMotion(tuple(_direction(spec["normal"], f"{where}.normal")))
+
+
+def servo_walls(specs: list, contact) -> ServoWalls | None:
+    """The servos of the `[[walls]]` tables with a `servo.stress`, on the scene's walls (in the tables'
+    order: planes and meshes each in theirs): the time loop's control; None where no wall has one."""
+    servos, schedules = [], []
+    count = {"plane": 0, "mesh": 0}
+    for i, spec in enumerate(specs):
+        kind = spec["type"]
+        wall = (contact.planes if kind == "plane" else contact.meshes)[count[kind]]
+        count[kind] += 1
+        servo = spec["servo"]
+        if not servo["stress"]:
+            continue
+        if contact.wall_names.count(wall.name) > 1:
+            raise ConfigError(f"walls[{i}].name: a servo wall needs a name of its own, {wall.name!r} is taken twice")
+        servos.append(Servo(contact, wall, servo["area"], gain=servo["gain"], max_speed=servo["max_speed"]))
+        schedules.append((servo["times"], servo["stress"]))
+    return ServoWalls(servos, schedules) if servos else None
+
+
 def build_walls(specs: list, base_dir=None):
-    """The `[[walls]]` tables as plane and mesh walls with their prescribed motion: (planes, meshes)."""
+    """The `[[walls]]` tables as plane and mesh walls with their prescribed or steered motion: (planes, meshes)."""
     planes, meshes = [], []
     for i, spec in enumerate(specs):
         where = f"walls[{i}]"
         name = spec["name"] or f"wall {i}"
-        motion = _motion(spec, where)
+        motion = _servo_motion(spec, where) or _motion(spec, where)
         if spec["type"] == "plane":
             normal = _direction(spec["normal"], f"{where}.normal")
             planes.append(PlaneWall(np.array(spec["point"], float), normal, motion, name,

@@ -274,7 +274,13 @@ class _Page:
                 note = f"`{scenario}`" + (f" (`{label}`)" if label != uses[0][1] else "")
                 by.append(note + (" with other defaults" if changed else ""))
             out += ["Used by " + ", ".join(by) + ".", ""]
-        return out + _rows(table)
+        out += _rows(table)
+        base = uses[0][1].strip("[]") if uses else name.lower()
+        for key, inner in table.items():  # its own tables (a wall's [walls.servo])
+            if isinstance(inner, dict):
+                label = f"[{base}.{key}]"
+                out += [f"#### `{label}` {{#{_anchor('table', name, key)}}}", ""] + _rows(inner)
+        return out
 
 
 def markdown() -> str:

@@ -193,7 +193,29 @@ WALL = {
     "times": Field(list, [0.0], _times_within(MAX_TIME), "times of the piecewise-linear displacement history (s)"),
     "displacements": Field(list, [[0.0, 0.0, 0.0]], _vectors_within(MAX_COORDINATE, "m"),
                            "rigid displacement at each time (m)"),
+    # a stress-controlled wall (docs/servo.md): its motion along `normal` is steered, not prescribed
+    "servo": {
+        "stress": Field(list, [], lambda v: _target_stresses(v),
+                        "target normal stress on the wall (Pa), one value per `servo.times` (piecewise-linear, held "
+                        "after the last); empty: no servo, the wall follows times/displacements"),
+        "times": Field(list, [0.0], _times_within(MAX_TIME), "times of `servo.stress` (s), increasing"),
+        "area": Field(float, None, _within(1e-12, 1e2, "m^2"),
+                      "the wall's loaded area (m^2): its force target is stress x area [required with a servo]"),
+        "max_speed": Field(float, None, _DRIVE_SPEED,
+                           "the wall's speed cap (m/s) [required with a servo]: quasi-static where the inertia number "
+                           "(rate x grain size / sqrt(stress / density)) stays below 1e-3"),
+        "gain": Field(float, 0.3, _in(0, 1, lo_open=True),
+                      "share of the force error the wall's travel closes per step (docs/servo.md)"),
+    },
 }
+
+
+def _target_stresses(v):
+    """Check: finite target stresses in [0, 1e9] Pa (a wall pushes or lets go; it cannot pull)."""
+    problem = finite_numbers(v)
+    if problem:
+        return problem
+    return None if all(0 <= x <= 1e9 for x in v) else "must be stresses in [0, 1e9] Pa (a wall cannot pull)"
 
 CONTACT = {
     "mu_s": Field(float, 0.0, non_negative, "static friction coefficient"),

@@ -130,6 +130,27 @@ class Servo:
         self.target, self.max_speed = float(carried["target"]), float(carried["max_speed"])
 
 
+class ServoWalls:
+    """Servo walls, each steered towards a target stress that is piecewise-linear in time (held
+    after its last time): the time loop's control for a scene's `[walls.servo]` tables."""
+
+    def __init__(self, servos: list[Servo], schedules: list[tuple]):
+        self.servos = servos
+        self.schedules = [(np.asarray(t, float), np.asarray(s, float)) for t, s in schedules]
+
+    def __call__(self, state, info) -> None:
+        for servo, (times, stresses) in zip(self.servos, self.schedules):
+            servo.target = float(np.interp(state.t, times, stresses))
+            servo(state, info)
+
+    def carried(self) -> dict:
+        return {"servos": [s.carried() for s in self.servos]}
+
+    def carry_on(self, carried: dict) -> None:
+        for servo, c in zip(self.servos, carried["servos"]):
+            servo.carry_on(c)
+
+
 def _inward_normal(wall) -> np.ndarray:
     """The unit axis a servo wall moves along, towards the grains: a plane's normal; a mesh wall's
     ServoMotion axis (it is given one)."""

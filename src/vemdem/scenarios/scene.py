@@ -3,7 +3,8 @@
 Outputs in DIR: summary.json, history.csv (energies), grains.csv (centroid position and velocity of
 every grain at every frame), walls.csv (force of the grains on every wall at every frame),
 grains.pvd + grains/*.vtu (ParaView), checkpoint.npz (the state at the last frame:
-`vemdem run ... --resume` continues from it to the same result).
+`vemdem run ... --resume` continues from it to the same result). A wall with a `[walls.servo]`
+table is stress-controlled: its motion along its normal follows a target stress (docs/servo.md).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import time
 from pathlib import Path
 
 from ..config import tables
-from ..config.build import build_scene, solver_options_from
+from ..config.build import build_scene, servo_walls, solver_options_from
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
 from ..io.results import write_json
@@ -30,7 +31,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     identity = run_identity(cfg, SCHEMA)
     result = simulate(scene, integrator, out_dir, duration=cfg["duration"], every=cfg["output"]["every"],
                       vtk=cfg["output"]["vtk"], identity=identity, v0=v0, resume=resume,
-                      progress=progress)  # fmt: skip
+                      progress=progress, control=servo_walls(cfg["walls"], scene.contact))  # fmt: skip
     summary = run_summary("scene", scene, result, t_start)
     write_json(Path(out_dir) / "summary.json", summary)
     return summary
