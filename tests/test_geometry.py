@@ -272,3 +272,34 @@ def test_constrained_submesh_of_a_schonhardt_polyhedron():
 def test_unknown_submesh_method():
     with pytest.raises(ValueError, match="unknown sub-mesh method"):
         build_submesh(cube(), "voronoi")
+
+
+# ---------------------------------------------------------------- a grain's mean deformation
+def _surfaces(grains):
+    """Stacked vertices, faces (global indices) and face -> grain of some polyhedra."""
+    X, faces, owner, start = [], [], [], 0
+    for g, p in enumerate(grains):
+        X.append(p.vertices)
+        faces.append(p.faces + start)
+        owner.append(np.full(len(p.faces), g))
+        start += len(p.vertices)
+    return np.vstack(X), np.vstack(faces), np.concatenate(owner)
+
+
+def test_the_mean_deformation_gradient_of_an_affine_map_is_the_map_and_of_a_rotation_no_strain():
+    """Divergence theorem on flat triangles: exact for x = A X + c (any A), whatever the shape; a
+    rotation has stretches of 1, a uniaxial stretch lambda a largest strain |lambda - 1|."""
+    from vemdem.geometry.mass import largest_strains, mean_deformation_gradients
+    from vemdem.geometry.shapes import rotation_matrix, sand_grain
+
+    grains = [sand_grain(size=1e-3, n_vertices=30, seed=s) for s in range(3)]
+    X, faces, owner = _surfaces(grains)
+    rng = np.random.default_rng(7)
+    A = np.eye(3) + 0.3 * rng.normal(size=(3, 3))
+    F = mean_deformation_gradients(X @ A.T + [1e-3, -2e-3, 5e-4], X, faces, owner, 3)
+    assert np.allclose(F, A, rtol=0, atol=1e-12)
+    R = rotation_matrix([0.3, -1.1, 0.7])
+    assert np.allclose(largest_strains(mean_deformation_gradients(X @ R.T, X, faces, owner, 3)), 0.0, atol=1e-12)
+    stretch = np.diag([1.0, 1.0, 0.75])  # a quarter shorter along z, then rotated
+    strains = largest_strains(mean_deformation_gradients(X @ (R @ stretch).T, X, faces, owner, 3))
+    assert np.allclose(strains, 0.25, rtol=1e-12)

@@ -80,3 +80,18 @@ def test_inertia_number_follows_its_definition():
     assert inertia_number(1e-3, 4e-3, 1e-3, 1e5, 2500.0) == pytest.approx(0.25e-3 / np.sqrt(40.0))
     assert inertia_number(-1e-3, 4e-3, 1e-3, 1e5, 2500.0) == inertia_number(1e-3, 4e-3, 1e-3, 1e5, 2500.0)
     assert inertia_number(1e-3, 4e-3, 1e-3, 0.0, 2500.0) == np.inf
+
+
+def test_each_grains_largest_strain_over_the_frames_and_the_validated_range(tmp_path):
+    from vemdem.analysis.oedometer import VALIDATED_STRAIN, grain_strain_maxima, grain_strain_summary
+
+    path = tmp_path / "grains.csv"
+    rows = ["time,grain,x,y,z,vx,vy,vz,strain"]
+    for t, strains in ((0.0, (0.01, 0.02, 0.0)), (0.1, (0.05, 0.25, 0.01)), (0.2, (0.04, 0.21, 0.3))):
+        rows += [f"{t},{g},0,0,0,0,0,0,{e}" for g, e in enumerate(strains)]
+    path.write_text("\n".join(rows) + "\n")
+    strains = grain_strain_maxima(path)
+    assert strains.tolist() == [0.05, 0.25, 0.3]
+    summary = grain_strain_summary(strains)
+    assert summary["max"] == 0.3 and summary["grain"] == 2 and summary["validated_range"] == VALIDATED_STRAIN
+    assert summary["grains_past_validated_range"] == 2

@@ -43,7 +43,7 @@ def test_scene_outputs_follow_the_contract(tmp_path):
     assert 0.0 <= summary["friction"]["elastic_slip_max"] < summary["contact"]["activation_gap"]
     assert len(history) == 1 + 5  # t = 0 and four frames
     grains = rows(tmp_path / "grains.csv")
-    assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
+    assert grains[0] == ["time", "grain", "x", "y", "z", "vx", "vy", "vz", "strain"]
     assert len(grains) == 1 + 5 * 2
     assert (tmp_path / "grains.pvd").is_file() and len(list((tmp_path / "grains").glob("*.vtu"))) == 5
     walls = rows(tmp_path / "walls.csv")

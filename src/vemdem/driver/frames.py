@@ -1,4 +1,5 @@
-"""Frames of a run: history.csv (energies), grains.csv (centroids), walls.csv (wall forces),
+"""Frames of a run: history.csv (energies), grains.csv (centroids, velocities and each grain's largest
+strain), walls.csv (wall forces),
 fabric.csv (the contact network's microstructure: analysis.microstructure, docs/microstructure.md)
 and the ParaView series grains.pvd (surfaces, velocity, projected stress, contact points and
 forces); at the end fabric_rose.png (the contact normals and forces of the first frame with
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.microstructure import FABRIC_HEADER, fabric_row, pair_contacts, plot_fabric_rose
+from ..geometry.mass import largest_strains, mean_deformation_gradients
 from ..io.results import CsvLog
 from ..io.vtk import PvdSeries
 from ..model.scene import Scene
@@ -22,7 +24,7 @@ from ..solver.state import State
 # summary.friction_reach: a slip beyond the contact layer means the load outgrew the friction spring)
 HISTORY_HEADER = ["time", "kinetic", "strain", "gravity", "contact", "dissipated", "n_contacts", "wall_work",
                   "elastic_slip"]  # fmt: skip
-GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz"]
+GRAINS_HEADER = ["time", "grain", "x", "y", "z", "vx", "vy", "vz", "strain"]
 WALLS_HEADER = ["time", "wall", "name", "fx", "fy", "fz"]  # force of the grains on each wall (N)
 FRAME_CSVS = ("history.csv", "grains.csv", "walls.csv", "fabric.csv")
 FABRIC_ROSE = "fabric_rose.png"
@@ -86,13 +88,21 @@ class FrameWriter:
                            elastic_slip(state.history.gt))  # fmt: skip
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
-        self.grains.write_rows([[state.t, g, *c[g], *vc[g]] for g in range(s.n_grains)])
+        strain = self.grain_strains(state.x)
+        self.grains.write_rows([[state.t, g, *c[g], *vc[g], strain[g]] for g in range(s.n_grains)])
         self.walls.write_rows([[state.t, w, name, *contact_result.wall_reactions[w]]
                                for w, name in enumerate(self.wall_names)])  # fmt: skip
         records = contact_result.records(s.contact.all_positions(state.x, state.t))
         self._write_fabric(state, records, c)
         if self.vtk is not None:
             self._write_vtk(state, contact_result, records.force)
+
+    def grain_strains(self, x: np.ndarray) -> np.ndarray:
+        """Each grain's largest principal strain |stretch - 1| of its mean deformation gradient from
+        its reference shape (grains.csv's `strain`; 0 for rigid grains)."""
+        s = self.scene
+        F = mean_deformation_gradients(x, s.bodies.reference, self.faces, self.face_grain, s.n_grains)
+        return largest_strains(F)
 
     def _write_fabric(self, state: State, records, centroids: np.ndarray) -> None:
         s = self.scene

@@ -61,3 +61,27 @@ def body_volumes(x: np.ndarray, faces: np.ndarray, face_body: np.ndarray, n_bodi
     a, b, c = x[faces[:, 0]] - o, x[faces[:, 1]] - o, x[faces[:, 2]] - o
     vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
     return np.bincount(face_body, weights=vol, minlength=n_bodies)
+
+
+def mean_deformation_gradients(x: np.ndarray, X: np.ndarray, faces: np.ndarray, face_body: np.ndarray,
+                               n_bodies: int) -> np.ndarray:  # fmt: skip
+    """(n_bodies, 3, 3) every body's volume-averaged deformation gradient from reference positions X
+    to x, by the divergence theorem over its closed surface: F = (1 / V0) sum over faces of
+    mean(x on the face) (x) (A N)_0, exact for surfaces of flat triangles (x is linear on each), so
+    F is the linear virtual element's own (its constant projected gradient); I for a rigid motion
+    up to its rotation."""
+    area_normal = 0.5 * np.cross(X[faces[:, 1]] - X[faces[:, 0]], X[faces[:, 2]] - X[faces[:, 0]])
+    centre = (x[faces[:, 0]] + x[faces[:, 1]] + x[faces[:, 2]]) / 3.0
+    terms = np.einsum("fi,fj->fij", centre, area_normal).reshape(len(faces), 9)
+    F = np.zeros((n_bodies, 9))
+    for k in range(9):  # nine bincounts: one pass over the faces each, no loop over bodies
+        F[:, k] = np.bincount(face_body, weights=terms[:, k], minlength=n_bodies)
+    volume0 = body_volumes(X, faces, face_body, n_bodies)
+    return F.reshape(n_bodies, 3, 3) / volume0[:, None, None]
+
+
+def largest_strains(F: np.ndarray) -> np.ndarray:
+    """(n,) each body's largest principal strain |lambda - 1| (Biot: stretch minus one) of its
+    deformation gradient F (n, 3, 3): 0 for a rigid motion, 0.2 for a fifth shorter or longer."""
+    stretches = np.linalg.svd(F, compute_uv=False)
+    return np.abs(stretches - 1.0).max(axis=1)
