@@ -39,7 +39,7 @@ KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "histor
                  "grains.pvd", "grains", "grain.pvd", "grain", "state.npz", "pile.png", "pile_3d.png", "pack_3d.png",
                  "force_strain.csv", "force_strain.png", "fluctuations.csv", "fluctuations.png",
                  "heap.png", "heap_3d.png", "tilt.png", "tilt_3d.png", "tilt.json", "pack",
-                 "reequilibrate")  # fmt: skip
+                 "reequilibrate", "oedometer.csv", "oedometer.png", "fabric_rose_stages.png", "roses")  # fmt: skip
 
 
 def _parser() -> argparse.ArgumentParser:

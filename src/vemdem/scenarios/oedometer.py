@@ -16,8 +16,8 @@ Outputs in DIR: oedometer.csv (one row per frame: analysis.oedometer.HEADER), oe
 against log sigma_v; sigma_h against sigma_v; the lid's force against the strain), summary.json
 (K0, constrained_modulus_loading_Pa, constrained_modulus_unloading_Pa, hysteresis_energy,
 residual_strain, max_inertia_number, stages: what each stage did, largest_grain_strain with one
-warning line where a grain passed the element's validated 20 %), fabric.csv and the scene
-outputs; `--resume` continues a run from inside any stage.
+warning line where a grain passed the element's validated 20 %), fabric_rose_stages.png (the
+contact normals' rose where each stage ended), fabric.csv and the scene outputs; `--resume` continues a run from inside any stage.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.microstructure import coordination, love_weber_stress
+from ..analysis.microstructure import coordination, love_weber_stress, pair_contacts, plot_fabric_rose
 from ..analysis.oedometer import (
     HEADER,
     VALIDATED_STRAIN,
@@ -57,6 +57,8 @@ from .pack import initial_state_from
 RESUMABLE = True
 SCHEMA = tables.OEDOMETER
 SIDES = ("wall -x", "wall +x", "wall -y", "wall +y")
+# the contact network where each stage ended (normals, normal forces), for fabric_rose_stages.png
+ROSE_FILE = "roses/stage_{}.npz"
 
 
 class StageNotReached(UserWarning):
@@ -83,8 +85,9 @@ class Oedometer:
         self.lid = lid
         self.walls = box_walls(*self.box, self.floor, self.centre) + [lid]
 
-    def bind(self, scene) -> None:
-        self.scene = scene
+    def bind(self, scene, out_dir: Path) -> None:
+        self.scene, self.out_dir = scene, Path(out_dir)
+        (self.out_dir / ROSE_FILE).parent.mkdir(parents=True, exist_ok=True)
         names = scene.contact.wall_names
         self.lid_index = names.index("lid")
         self.side_index = [names.index(n) for n in SIDES]
@@ -105,9 +108,14 @@ class Oedometer:
 
     def at_stage_end(self, state, info) -> dict:
         """The lateral stress and the contacts' sigma_zz (Love-Weber) where a stage ends: at rest, the
-        latter is the lid's stress measured inside the sample."""
+        latter is the lid's stress measured inside the sample. The contacts' normals and forces
+        there are kept for the rose of the turning points (ROSE_FILE, one per stage)."""
         records = info.contact.records(self.scene.contact.all_positions(state.x, state.t))
         volume = self.area * self.height(state.t)
+        pairs = pair_contacts(records.a, records.b, records.normal, records.force, self.scene.n_grains)
+        stage = self.path.current
+        np.savez(self.out_dir / ROSE_FILE.format(stage), t=state.t, target=self.path.stages[stage].stress,
+                 normals=pairs.normal, fn=pairs.fn)  # fmt: skip
         return {"sigma_h_end": self.sigma_h(info.wall_reactions, state.t),
                 "sigma_v_contacts_end": love_weber_zz(self.scene, state.x, records, volume)}  # fmt: skip
 
@@ -125,6 +133,20 @@ class Oedometer:
         return [state.t, stage, sigma_v, self.sigma_h(contact.wall_reactions, state.t), 1.0 - h / self.height0,
                 total / solids - 1.0, solids / total, z_m,
                 inertia_number(speed, h, self.grain_size, sigma_v, density), h, speed, force, lw, unbalanced]  # fmt: skip
+
+
+def plot_stage_roses(out_dir: Path, records: list[dict]) -> None:
+    """fabric_rose_stages.png: the contact normals' rose and the normal forces' distribution where
+    each stage ended (the turning points of the path), one row per stage."""
+    frames = []
+    for r in records:
+        path = out_dir / ROSE_FILE.format(r["stage"])
+        if r["end_reason"] and path.is_file():
+            with np.load(path) as d:
+                label = f"stage {r['stage']}: {float(d['target']) / 1e3:g} kPa, {r['end_reason']} (t = {float(d['t']):.4g} s)"
+                frames.append((label, d["normals"], d["fn"]))
+    if frames:
+        plot_fabric_rose(out_dir / "fabric_rose_stages.png", frames)
 
 
 def love_weber_zz(scene, x, records, volume: float) -> float:
@@ -148,13 +170,14 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     test = Oedometer(cfg, initial)
     scene = scene_from(initial.grains, cfg, test.walls)
-    test.bind(scene)
+    test.bind(scene, out_dir)
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density
     stages = stages_from(cfg, density, test.height0, test.grain_size)
     servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
     path_ = LoadPath(servo, stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
                      cfg["servo"]["stress_tolerance"], cfg["servo"]["unbalanced_tolerance"], test.at_stage_end)  # fmt: skip
+    test.path = path_
     identity = run_identity(cfg, SCHEMA)
     resume_here = resume and (out_dir / "checkpoint.npz").is_file()
     csv_path = out_dir / "oedometer.csv"
@@ -184,6 +207,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     figures = oedometer_figures(records, rows)
     title = f"{scene.n_grains} grains, E = {scene.material.E:.3g} Pa, {integrator.name}"
     plot_oedometer(rows, turning_points(records), out_dir / "oedometer.png", title, test.area)
+    plot_stage_roses(out_dir, records)
     summary = run_summary("oedometer", scene, result, t_start)
     summary.update(figures)
     summary["stages"] = records
