@@ -92,7 +92,7 @@ def stress_controlled(cfg: dict, out: Path, low: float, high: float, max_time: f
     end = time.perf_counter()
     first, decade = path.stage_records()
     return {"steps": decade["steps"], "newton": decade["newton_iterations"],
-            "simulated": decade["end_time"] - decade["start_time"], "end_reason": decade["end_reason"],
+            "simulated": float(decade["end_time"]) - float(decade["start_time"]), "end_reason": decade["end_reason"] or "not ended",
             "first_stage_end": first["end_reason"], "wall_total": end - t0, "wall": end - marks.get("start", end)}  # fmt: skip
 
 
