@@ -248,11 +248,12 @@ def test_every_example_runs_reduced(gallery, name):
         path = out / filename
         assert path.is_file() and path.stat().st_size > 0, f"{name}: {filename} missing or empty"
 
-    if scenario == "oedometer":  # being reworked: its files, finite stresses and one record per stage
+    if scenario == "oedometer":  # its files, finite stresses, and every stage ended (at its target or a limit)
         rows = np.genfromtxt(out / "oedometer.csv", delimiter=",", names=True)
         sigma_v = np.atleast_1d(rows["sigma_v"])
         assert len(sigma_v) >= 2 and np.all(np.isfinite(sigma_v))
         assert len(on_disk["stages"]) == 2
+        assert all(s["end_reason"] in ("reached", "max_time", "max_strain") for s in on_disk["stages"]), on_disk["stages"]
         return
 
     if "solver" in full and "integrator" in full["solver"]:  # the time-stepping scenarios

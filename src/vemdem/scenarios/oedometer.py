@@ -188,7 +188,9 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
             log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
         log["csv"].write(*test.row(state, contact, min(path_.current, len(stages) - 1), density))
 
-    duration = float(sum(s.max_time for s in stages))
+    # a stage begins at the step after the last one ended and ends at the first step past its
+    # max_time: up to a frame per stage on top of the stages' times lets the last one end at its limit
+    duration = float(sum(s.max_time for s in stages)) + len(stages) * cfg["output"]["every"]
     try:
         result = simulate(scene, integrator, out_dir, duration=duration, every=cfg["output"]["every"],
                           vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x, v0=initial.v,
@@ -200,7 +202,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
             log["csv"].close()
     records = path_.stage_records()
     for r in records:
-        if r["end_reason"] not in ("reached", ""):
+        if not r["end_reason"]:
+            warnings.warn(StageNotReached(f"stage {r['stage']} ({r['target']:g} Pa) had not ended when the run did"),
+                          stacklevel=2)  # fmt: skip
+        elif r["end_reason"] != "reached":
             warnings.warn(StageNotReached(f"stage {r['stage']} ({r['target']:g} Pa) ended at its {r['end_reason']} "
                                           f"with the lid at {r['end_stress']:.4g} Pa"), stacklevel=2)  # fmt: skip
     rows = read_rows(csv_path)
