@@ -104,7 +104,7 @@ def reduce_tilting_box(raw):
 
 
 def reduce_oedometer(raw):
-    # the oedometer is being reworked: a fixed small path, and only its files are checked
+    # the oedometers: a fixed small path; their files, and that every stage ended
     return merged(raw, {"pack": {"n_grains": 4, "grains": {"size": 1.2e-3, "vertices": 8},
                                  "box": {"width": 3.2e-3, "depth": 3.2e-3}},
                         "stages": [{"stress": 200.0, "max_time": 0.01}, {"stress": 100.0, "max_time": 0.005}],
