@@ -122,3 +122,24 @@ def test_the_spring_back_split_says_what_the_docs_say(tmp_path):
     out = tmp_path / "spring_back.png"
     module.main(out)
     assert out.stat().st_size > 20_000
+
+
+def test_the_paper_oedometer_follows_the_strain_controlled_loading_curve(tmp_path):
+    """docs/oedometer.md, "The paper's lid test at a stress": the servo's lid carries almost nothing
+    above 5.6 mm (below 17 % strain of its own start), then its force rises by a decade per 0.1 mm
+    or faster, as the strain-controlled cycles' loading does (within 0.15 mm of where the cycle
+    turned at 26 % carries the same force)."""
+    module = _module(LID_SCRIPT.parent / "paper_oedometer.py")
+    po = module.read(module.HERE / "paper_oedometer.csv")
+    height, force = po["lid_height"] * 1e3, po["lid_force"]
+    assert np.all(np.diff(height[po["stage"] == 0]) <= 0)  # the first stage only loads
+    assert force[height > 5.6].max() < 0.05
+    loaded = force > 0.01
+    assert loaded.any()
+    cycle = module.read(module.HERE / "lid515_turn26_real.csv")
+    cycle_height = module.LID_START_MM * (1.0 - cycle["strain"])
+    first = np.argmax(cycle["force"] > 0.01)
+    assert abs(height[np.argmax(loaded)] - cycle_height[first]) < 0.15
+    out = tmp_path / "po.png"
+    module.main(out)
+    assert out.stat().st_size > 20_000
