@@ -161,6 +161,8 @@ CONFIG_CASES = [
     ("mass scaling of 1e300", DROP, setter("solver.mass_scaling", 1e300), "solver.mass_scaling: must be in [1, 1e8]"),
     # a singular mass matrix once, every step rejected down to TimeStepTooSmall
     ("beta_mass of 0", DROP, setter("vem.beta_mass", 0.0), "vem.beta_mass: must be in (0, 1]"),
+    # the load's stabilisation share, as the mass's: the paper's beta_e is positive
+    ("beta_load of 0", DROP, setter("vem.beta_load", 0.0), "vem.beta_load: must be in (0, 1]"),
     # the loop cut its only frame to the run's end
     ("output.every above duration", DROP, setter("output.every", 1.0),
      "output.every: must not exceed duration (0.02 s)"),

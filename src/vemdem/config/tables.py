@@ -156,7 +156,7 @@ MATERIAL = {
 VEM = {
     "beta_internal": Field(float, 0.5, _stabilised, "beta_i of paper eq. 8"),
     "beta_mass": Field(float, 1.0, _mass_stabilised, "beta_d of paper eq. 8"),
-    "beta_load": Field(float, 1.0, unit_interval, "beta_e of paper eq. 8"),
+    "beta_load": Field(float, 1.0, _in(0, 1, lo_open=True), "beta_e of paper eq. 8"),
     "submesh": Field(METHODS, "auto", doc="stabilisation sub-mesh"),
 }
 
