@@ -1,4 +1,4 @@
-"""Normal interface law (formulation.md section 1): fixture values, continuity, potential, stiffness."""
+"""Normal interface law (docs/contact.md): fixture values, continuity, potential, stiffness."""
 
 import numpy as np
 import pytest

@@ -295,7 +295,7 @@ def _edge_edge_links(ints, topo):
     return links
 
 
-def test_the_edge_edge_rule_drops_the_vertex_edge_pairs_formulation_4_4_names(rng):
+def test_the_edge_edge_rule_drops_the_vertex_edge_pairs_the_paper_names(rng):
     """Formulation 4.4's last clause, checked from the records alone: with `edge_edge_rule` the
     records are those without it less exactly the vertex-edge pairs (P, E) that two or more
     edge-edge records join (E with edges at P), the spots the default counts up to three times.

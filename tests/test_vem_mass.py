@@ -53,7 +53,7 @@ def test_mass_is_symmetric_positive_definite_with_submesh(grain):
 
 
 def test_projection_mass_has_rank_twelve():
-    """M_Pi sees only the linear part of the motion: rank 12 (formulation.md section 6)."""
+    """M_Pi sees only the linear part of the motion: rank 12 (docs/vem.md)."""
     grain = sand_grain(seed=4, n_vertices=30)
     M = mass_for(grain, 0.0).matrix().toarray()
     s = np.linalg.svd(M, compute_uv=False)

@@ -235,7 +235,7 @@ CONTACT = {
                            "potential is continuous there (docs/contact.md: no energy jumps, but Newton is slower in "
                            "jammed packs)"),
     "edge_edge_rule": Field(bool, False,
-                            doc="the paper's full contact hierarchy (formulation 4.4): a vertex-edge pair also yields "
+                            doc="the paper's full contact hierarchy (docs/contact.md): a vertex-edge pair also yields "
                                 "to two eligible edge-edge pairs between its edge and edges at its vertex, so a "
                                 "touching spot counts once there (off, the default: it may count up to three times, "
                                 "which keeps energy jumps out of implicit runs; docs/contact.md)"),

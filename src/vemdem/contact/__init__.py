@@ -1,2 +1,2 @@
 """Contact between grains and walls: broad phase, master-to-master narrow phase, interface law,
-friction and walls (paper section 2.2, formulation.md sections 1-4)."""
+friction and walls (paper section 2.2, docs/contact.md)."""

@@ -1,4 +1,4 @@
-"""Broad phase: candidate grain pairs in O(N) with a uniform grid (formulation.md 4.1).
+"""Broad phase: candidate grain pairs in O(N) with a uniform grid (docs/contact.md).
 
 Each grain's axis-aligned box, inflated by half the activation gap, goes into every grid cell
 it overlaps. The cell size is the largest box extent, so a box touches at most 8 cells. Two

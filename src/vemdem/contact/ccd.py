@@ -4,11 +4,11 @@ Integrators ask here how far a step or a Newton update may go before two surface
 inside the activation layer unseen, and whether a step missed a pair. Nothing here knows a scene
 or a state (they live in model/ and solver/), so contact never points back up at them.
 
-- conservative advancement (formulation.md 4.5): surfaces with active pairs are at least their
+- conservative advancement (docs/contact.md): surfaces with active pairs are at least their
   smallest active gap apart, any other two at least the activation gap gbar; an update moving
   surface s by at most d_s keeps every pair apart when alpha (d_a + d_b) < gap;
 - missed pairs: a pair found only by the end-of-step search and already inside gbar;
-- contact-impact step (formulation.md 5): an approaching pair closes at most a share f of gbar
+- contact-impact step (docs/dynamics.md): an approaching pair closes at most a share f of gbar
   inside the layer per step, an active one resolves half its oscillation pi sqrt(m_eq / k) in
   N_impact steps;
 - explicit approach bounds: per-grain centre speed and spin radius, lowest vertex over a plane.
@@ -267,7 +267,7 @@ def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.nda
 
 def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> int:
     """Pairs that appear only in a search at the end of a step and are already inside the
-    activation gap: the step passed them by (formulation.md 4.5). `contact` is the ContactModel."""
+    activation gap: the step passed them by (docs/contact.md). `contact` is the ContactModel."""
     fresh = contact.search(x, t)
     if len(fresh) == 0:
         return 0
@@ -282,7 +282,7 @@ def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> in
 
 def impact_step_limit(gap: np.ndarray, rate: np.ndarray, m_eq: np.ndarray, law_params: np.ndarray, gbar: float,
                       entry_fraction: float, impact_steps: float) -> float:  # fmt: skip
-    """Contact-impact step control (formulation.md 5) from the pairs' gaps, gap rates and masses:
+    """Contact-impact step control (docs/dynamics.md) from the pairs' gaps, gap rates and masses:
     - an approaching pair (rate -dg/dt) may close at most f gbar inside the layer in one step:
       dt <= (max(g - gbar, 0) + f gbar) / (-dg/dt);
     - an active pair resolves half its contact oscillation in N steps: dt <= pi sqrt(m_eq / k(g)) / N.

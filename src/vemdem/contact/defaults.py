@@ -1,5 +1,5 @@
 """Contact parameters derived from the grains, so that giving friction coefficients is enough
-(formulation.md section 9; every value is documented in docs/contact.md).
+(every value is documented in docs/contact.md).
 
     activation gap       gbar  = 0.01 d                 (d: equivalent grain diameter)
     switch factor        0.3, penalty exponent n1 = 2, barrier exponent n2 = -2   (GIRAFFE's law)

@@ -1,5 +1,5 @@
 """Normal damping and Coulomb friction with static and dynamic coefficients
-(formulation.md sections 2 and 3).
+(docs/contact.md).
 
 Per pair, with current contact point weights w(c), normal n, gap d and velocities v:
 

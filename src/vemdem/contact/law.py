@@ -1,4 +1,4 @@
-"""The combined penalty/barrier normal interface law (formulation.md section 1).
+"""The combined penalty/barrier normal interface law (docs/contact.md).
 
 With the unsigned gap g >= 0 between the two contact points, activation gap gbar and the
 switch gap gbb = factor * gbar:
@@ -32,7 +32,8 @@ class InterfaceLaw:
     switch_factor: float = 0.3  # gbb / gbar
     barrier_exponent: float = -2.0  # n2
     edge_fade: bool = False  # weigh edge-edge records out near their edges' ends (contact/fade.py)
-    # formulation 4.4's last clause: a vertex-edge pair yields to two eligible edge-edge pairs at its vertex
+    # the last clause of the paper's hierarchy (docs/contact.md): a vertex-edge pair yields to two
+    # eligible edge-edge pairs at its vertex
     edge_edge_rule: bool = False
 
     def __post_init__(self):

@@ -1,6 +1,6 @@
 """The contact layer of a scene: grains, walls, search, forces, tangent and friction history.
 
-Data flow per time step (formulation.md 4.1): `search` runs the broad phase once at the start
+Data flow per time step (docs/contact.md): `search` runs the broad phase once at the start
 of a step; `evaluate` re-solves the LCPs of those candidates at every Newton iterate and returns
 the contact potential, residual, tangent and the wall reactions; `commit` stores the friction
 history of the converged state.

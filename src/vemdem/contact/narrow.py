@@ -202,7 +202,7 @@ def gap_derivatives_into(kind, xs, c0, c1, want_hessian, grad, hess, w0, D, w, g
 
     xs (6, 3): node positions in the pair's order. Because c solves the LCP, grad d = n (x) w
     (the change of c does not enter to first order). The Hessian includes it through the Schur
-    complement of q = |g|^2 (formulation.md 4.6: dc/dx = -H_cc^-1 d2q/dc dx):
+    complement of q = |g|^2 (docs/contact.md: dc/dx = -H_cc^-1 d2q/dc dx):
 
         d2q/dx2 = 2 (w w^T) (x) I,   H_cc = 2 J^T J,   d2q/dx_i dc_k = 2 (D_ik g + w_i J_k),
         hess q  = d2q/dx2 - B H_cc^-1 B^T,   hess d = hess q / (2 d) - grad q grad q^T / (4 d^3).

@@ -1,4 +1,4 @@
-"""Narrow phase between two grains: eligible contact pairs and the hierarchy (formulation.md 4.2-4.4).
+"""Narrow phase between two grains: eligible contact pairs and the hierarchy (docs/contact.md).
 
 For a pair of grains (A, B) whose inflated boxes overlap, the features of each grain that reach
 into the other's box (inflated by the activation gap) are tested pairwise:
@@ -9,7 +9,7 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   by the vertex-face pairs of the planar region
     vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
                   eligible vertex-face pair with either face at the edge, a concave edge only to
-                  both; with `[contact] edge_edge_rule` (formulation 4.4, the paper's hierarchy) also
+                  both; with `[contact] edge_edge_rule` (the paper's hierarchy, docs/contact.md) also
                   to two or more eligible edge-edge pairs between the edge and edges at the vertex.
                   Off by default: the rule switches the record on inside the
                   layer as they leave (an energy jump), and with the edge-edge fade, fade.py, it
@@ -157,7 +157,8 @@ def _ee_gap(x, ea, eb, edges, edge_type, gbar):
 
 @njit(cache=True)
 def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule):
-    """The vertex-edge hierarchy (module docstring); with ee_rule also formulation 4.4's last clause:
+    """The vertex-edge hierarchy (module docstring); with ee_rule also the last clause of the
+    paper's hierarchy (docs/contact.md):
     the pair yields to two or more eligible edge-edge pairs between e and edges at p."""
     fa = edge_faces[e, 0]
     fb = edge_faces[e, 1]

@@ -1,7 +1,7 @@
 """Surface features of all grains in flat arrays: faces, edges, their neighbours and edge type.
 
 Built once per scene (reference configuration) for the narrow phase and its hierarchy
-(formulation.md 4.4): which faces meet at an edge, which edges and faces meet at a vertex,
+(docs/contact.md): which faces meet at an edge, which edges and faces meet at a vertex,
 and whether an edge is convex, flat or concave.
 """
 

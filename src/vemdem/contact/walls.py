@@ -1,4 +1,4 @@
-"""Rigid walls with a prescribed motion: planes and triangulated bodies (formulation.md 4.7).
+"""Rigid walls with a prescribed motion: planes and triangulated bodies (docs/contact.md).
 
 A wall is fixed, removed at a given time, or moved along a piecewise-linear displacement
 history. Planes touch grains through vertex-plane pairs only (no edge or face of a grain can

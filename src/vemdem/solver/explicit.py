@@ -1,4 +1,4 @@
-"""Explicit central differences with lumped mass (formulation.md 5; docs/dynamics.md).
+"""Explicit central differences with lumped mass (docs/dynamics.md).
 
 Velocity Verlet form, which is central differences for the positions and allows a step that
 changes from one step to the next:

@@ -1,4 +1,4 @@
-"""Implicit Newmark time stepping with full Newton on elements + contact (formulation.md 5).
+"""Implicit Newmark time stepping with full Newton on elements + contact (docs/dynamics.md).
 
     a = a1 du - a2 v_n - a3 a_n,   v = a4 du + a5 v_n + a6 a_n,   du = x - x_n
     a1 = 1/(beta dt^2), a2 = 1/(beta dt), a3 = 1/(2 beta) - 1,

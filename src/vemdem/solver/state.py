@@ -1,7 +1,7 @@
 """What an integrator carries from step to step, and what it reports.
 
 `State` is the whole dynamic state of a run (a checkpoint writes exactly these arrays, so a resumed
-run continues bit for bit); `StepControl` the adaptive step (formulation.md 5: halve on rejection,
+run continues bit for bit); `StepControl` the adaptive step (docs/dynamics.md: halve on rejection,
 grow after easy steps); `RunStats` the counters every summary reports.
 """
 
@@ -62,7 +62,7 @@ class StepInfo:
 
 @dataclass
 class StepControl:
-    """Adaptive step (formulation.md 5): halve on rejection, grow after easy steps."""
+    """Adaptive step (docs/dynamics.md): halve on rejection, grow after easy steps."""
 
     dt: float = 1e-5
     dt_min: float = 1e-10
@@ -74,7 +74,7 @@ class StepControl:
     easy_iterations: int = 8
     grow_after: int = 3
     easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
-    impact_steps: float = 0.0  # > 0: contact-impact step control on (formulation.md 5, contact.ccd)
+    impact_steps: float = 0.0  # > 0: contact-impact step control on (docs/dynamics.md, contact.ccd)
     entry_fraction: float = 0.05  # implicit: share of the activation gap an approaching pair may close per step
     energy_growth: float = 1e-3  # implicit: largest energy gain of a step, in sum m g d (0: off; newmark.advance)
 

@@ -3,7 +3,7 @@
 Minimises a potential W(x) over the free dofs: solve K_ff dx_f = -R_f, then a backtracking
 line search keeps every iterate admissible (finite energy, no inverted element) and stops
 the energy from rising. Convergence: the free residual is small against the reference
-force AND the last correction is small against the size of the step (formulation.md 5).
+force AND the last correction is small against the size of the step (docs/dynamics.md).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 
 The paper prints the exponent as -3/2, a typo: only with -2/3 is the first term blind to a
 pure dilation F = J^(1/3) I (J^(-2/3) tr(F^T F) = 3 for every J), so that shape change and
-volume change are split as intended (formulation.md section 6). Derivatives:
+volume change are split as intended (docs/vem.md). Derivatives:
 
     P = dpsi/dF = mu J^(-2/3) (F - tr(C)/3 F^-T) + kappa/2 (J^2 - 1) F^-T
     A = dP/dF   (written out in `neo_hooke`, index order A[3i+I, 3j+J] = dP_iI / dF_jJ)
