@@ -230,16 +230,27 @@ def servo_scene(tmp_path, servo: dict, lid: dict | None = None) -> dict:
             "output": {"every": 0.02, "vtk": False}}  # fmt: skip
 
 
-def test_a_scene_wall_with_a_servo_table_follows_its_target_stress(tmp_path):
-    """The scene's lid holds 45 grain weights, then twice that from t = 0.04 s on (a ramp over
-    0.01 s): the walls.csv force at the frames after each is the target stress x area within 1 %."""
+# a square mesh lid 4 mm wide at the plane lid's height, its normals facing down at the grain
+MESH_LID = (b"v -0.002 -0.002 0.001004\nv 0.002 -0.002 0.001004\nv 0.002 0.002 0.001004\n"
+            b"v -0.002 0.002 0.001004\nf 1 3 2\nf 1 4 3\n")
+
+
+@pytest.mark.parametrize("kind", ["plane", "mesh"])
+def test_a_scene_wall_with_a_servo_table_follows_its_target_stress(tmp_path, kind):
+    """The scene's lid, a plane or a mesh, holds 45 grain weights, then twice that from t = 0.04 s
+    on (a ramp over 0.01 s): the walls.csv force at the frames after each is the target stress x
+    area within 1 %."""
     weight = 2200.0 * SIZE**3 * 9.81
     s1 = 45 * weight / SIZE**2
     servo = {"stress": [s1, s1, 2 * s1], "times": [0.0, 0.04, 0.05], "area": SIZE**2, "max_speed": 2e-3}
-    cfg, module = checked_config(servo_scene(tmp_path, servo))
+    lid = None
+    if kind == "mesh":
+        (tmp_path / "lid.obj").write_bytes(MESH_LID)
+        lid = {"type": "mesh", "file": str(tmp_path / "lid.obj")}
+    cfg, module = checked_config(servo_scene(tmp_path, servo, lid))
     module.run(cfg, tmp_path / "run")
     rows = np.genfromtxt(tmp_path / "run" / "walls.csv", delimiter=",", names=True, dtype=None, encoding=None)
-    lid = rows[rows["wall"] == 1]
+    lid = rows[rows["name"] == "lid"]
     force = {round(float(t), 3): f for t, f in zip(lid["time"], lid["fz"])}  # the grains push the lid up
     assert force[0.04] == pytest.approx(s1 * SIZE**2, rel=0.01)
     assert force[0.08] == pytest.approx(2 * s1 * SIZE**2, rel=0.01)
