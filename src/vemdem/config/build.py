@@ -108,8 +108,8 @@ def _direction(normal: list, key: str) -> np.ndarray:
 def _servo_motion(spec: dict, where: str) -> ServoMotion | None:
     """A servo wall's steered motion along its `normal` (None for a wall without a servo), after the
     checks a servo's keys need together."""
-    servo = spec["servo"]
-    if not servo["stress"]:
+    servo = spec.get("servo")
+    if not servo or not servo["stress"]:
         return None
     if len(servo["stress"]) != len(servo["times"]):
         raise ConfigError(f"{where}.servo.stress: one stress per servo.times ({len(servo['times'])}), "
@@ -134,8 +134,8 @@ def servo_walls(specs: list, contact) -> ServoWalls | None:
         kind = spec["type"]
         wall = (contact.planes if kind == "plane" else contact.meshes)[count[kind]]
         count[kind] += 1
-        servo = spec["servo"]
-        if not servo["stress"]:
+        servo = spec.get("servo")
+        if not servo or not servo["stress"]:
             continue
         if contact.wall_names.count(wall.name) > 1:
             raise ConfigError(f"walls[{i}].name: a servo wall needs a name of its own, {wall.name!r} is taken twice")

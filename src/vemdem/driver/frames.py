@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.microstructure import FABRIC_HEADER, fabric_row, pair_contacts, plot_fabric_rose
-from ..geometry.mass import largest_strains, mean_deformation_gradients
 from ..io.results import CsvLog
 from ..io.vtk import PvdSeries
 from ..model.scene import Scene
@@ -88,7 +87,7 @@ class FrameWriter:
                            elastic_slip(state.history.gt))  # fmt: skip
         c = s.grain_centroids(state.x)
         vc = s.grain_centroids(state.v)
-        strain = self.grain_strains(state.x)
+        strain = s.grain_strains(state.x)
         self.grains.write_rows([[state.t, g, *c[g], *vc[g], strain[g]] for g in range(s.n_grains)])
         self.walls.write_rows([[state.t, w, name, *contact_result.wall_reactions[w]]
                                for w, name in enumerate(self.wall_names)])  # fmt: skip
@@ -96,13 +95,6 @@ class FrameWriter:
         self._write_fabric(state, records, c)
         if self.vtk is not None:
             self._write_vtk(state, contact_result, records.force)
-
-    def grain_strains(self, x: np.ndarray) -> np.ndarray:
-        """Each grain's largest principal strain |stretch - 1| of its mean deformation gradient from
-        its reference shape (grains.csv's `strain`; 0 for rigid grains)."""
-        s = self.scene
-        F = mean_deformation_gradients(x, s.bodies.reference, self.faces, self.face_grain, s.n_grains)
-        return largest_strains(F)
 
     def _write_fabric(self, state: State, records, centroids: np.ndarray) -> None:
         s = self.scene

@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from ..contact.friction import FrictionLaw
 from ..contact.law import InterfaceLaw, normal_force
 from ..contact.model import ContactModel
+from ..geometry.mass import largest_strains, mean_deformation_gradients
 from ..geometry.polyhedron import Polyhedron
 from ..vem.element import VemOptions
 from ..vem.material import Material
@@ -91,6 +92,13 @@ class Scene:
         element's load vector or the lumped masses (the explicit integrator's)."""
         weights = self.bodies.lumped if lumped else self.bodies.load
         return -float(np.sum(weights[:, None] * self.gravity[None, :] * x))
+
+    def grain_strains(self, x: np.ndarray) -> np.ndarray:
+        """Each grain's largest principal strain |stretch - 1| of its mean deformation gradient from
+        its reference shape (0 for rigid grains; geometry.mass.mean_deformation_gradients)."""
+        n_faces = self.contact.topology.grain_face_ptr[self.n_grains]
+        faces, owner = self.contact.topology.faces[:n_faces], self.contact.topology.face_grain[:n_faces]
+        return largest_strains(mean_deformation_gradients(x, self.bodies.reference, faces, owner, self.n_grains))
 
     def grain_centroids(self, x: np.ndarray) -> np.ndarray:
         """Mass-weighted centre of each grain (lumped weights: exact for the centre of mass)."""
