@@ -17,7 +17,8 @@ against log sigma_v; sigma_h against sigma_v; the lid's force against the strain
 (K0, constrained_modulus_loading_Pa, constrained_modulus_unloading_Pa, hysteresis_energy,
 residual_strain, max_inertia_number, stages: what each stage did, largest_grain_strain with one
 warning line where a grain passed the element's validated 20 %), fabric_rose_stages.png (the
-contact normals' rose where each stage ended), fabric.csv and the scene outputs; `--resume` continues a run from inside any stage.
+contact normals' rose where each stage ended), fabric.csv and the scene outputs; `--resume`
+continues a run from inside any stage.
 """
 
 from __future__ import annotations
