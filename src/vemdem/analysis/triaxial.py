@@ -1,0 +1,294 @@
+"""A drained triaxial test's measures: its frames (triaxial.csv), the strength and stiffness
+figures summary.json reports, and the Mohr-Coulomb envelope over several confining stresses
+(docs/triaxial.md).
+
+Soil mechanics' signs: compression positive, stresses and strains alike. sigma_1 is the axial
+(major) stress, sigma_3 the lateral (minor, confining) one; q = sigma_1 - sigma_3 and
+p = (sigma_1 + 2 sigma_3) / 3; eps_v = eps_1 + 2 eps_3, so a dilating sample has eps_v falling.
+Strains are measured from the start of shear: the consolidation stage is the sample's reference.
+
+- friction angle phi: the Mohr-Coulomb angle without cohesion that the principal stress ratio
+  R = sigma_1 / sigma_3 mobilises, sin(phi) = (R - 1) / (R + 1). A cohesionless granular
+  material's strength is a ratio, not a stress, so this is the number to compare across
+  confining stresses and with the literature.
+- peak: the largest R over the shear (phi_peak), where it happens, and the largest deviator q.
+  Dense packs peak and then soften; loose ones harden monotonically to their critical state.
+- critical state: the state sheared at constant volume and stress ratio. Measured as the means
+  of R (phi_cs) and of eta = q / p over the last `window` of axial strain; the spread (standard
+  deviation over that window) says whether the run got there or is still drifting.
+- dilatancy angle psi: Bolton's (1986) triaxial form sin(psi) = -(d eps_v / d eps_a) /
+  (2 - d eps_v / d eps_a), its largest value over the test. The slope is a least-squares line
+  over a moving window of axial strain, so that frame-to-frame noise of a DEM sample does not
+  set the maximum. Negative psi: the sample only contracted.
+- E50: the secant modulus at half the peak deviator, the usual stiffness of a triaxial curve
+  (Duncan-Chang's reference modulus); the initial tangent of a DEM curve is too noisy to use.
+- Mohr-Coulomb envelope: a least-squares line through the tests' failure states in the s-t
+  plane (s = (sigma_1 + sigma_3) / 2, t = (sigma_1 - sigma_3) / 2): t = a + s tan(alpha) maps
+  to sin(phi) = tan(alpha), c = a / cos(phi). The s-t line is exact for Mohr circles tangent to
+  a straight envelope, where fitting tau-sigma points would need the tangent points first.
+- max_inertia_number: the largest inertia number over the shear frames, the check that the
+  shear was quasi-static.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+HEADER = ("time", "stage", "axial_strain", "volumetric_strain", "sigma_1", "sigma_3", "q", "p", "void_ratio",
+          "coordination", "fabric_anisotropy", "inertia_number")  # fmt: skip
+CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
+
+# Rows whose axial strain lies on a window's edge count as inside it: the strains are sums of
+# floats, and a row dropped at one edge only would skew the window's fit
+_EDGE = 1e-12
+
+
+def friction_angle(ratio):
+    """The mobilised friction angle (degrees) of the principal stress ratio R = sigma_1 / sigma_3,
+    cohesionless Mohr-Coulomb: sin(phi) = (R - 1) / (R + 1). Scalars give a float, arrays an array."""
+    r = np.asarray(ratio, dtype=float)
+    phi = np.degrees(np.arcsin((r - 1.0) / (r + 1.0)))
+    return float(phi) if phi.ndim == 0 else phi
+
+
+def stress_ratio_from_angle(phi_deg):
+    """friction_angle's inverse: R = (1 + sin phi) / (1 - sin phi) = tan^2(45 deg + phi / 2)."""
+    s = np.sin(np.radians(np.asarray(phi_deg, dtype=float)))
+    r = (1.0 + s) / (1.0 - s)
+    return float(r) if r.ndim == 0 else r
+
+
+def _ratio(sigma_1, sigma_3) -> np.ndarray:
+    """sigma_1 / sigma_3, NaN where the lateral walls carry nothing (no ratio to speak of there)."""
+    s1, s3 = np.asarray(sigma_1, dtype=float), np.asarray(sigma_3, dtype=float)
+    out = np.full(np.broadcast(s1, s3).shape, np.nan)
+    np.divide(s1, s3, out=out, where=s3 > 0)
+    return out
+
+
+def peak(axial, sigma_1, sigma_3) -> dict:
+    """The peak of the principal stress ratio (phi_peak_deg, ratio_peak, axial_strain_at_peak) and
+    the largest deviator q_peak. With sigma_3 held by the servos the two peaks coincide up to its
+    noise; q_peak is the deviator's own maximum, the one E50 halves."""
+    axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
+    ratio = _ratio(s1, s3)
+    if not np.any(np.isfinite(ratio)):
+        raise ValueError("no row with a positive sigma_3: no stress ratio to find a peak of")
+    i = int(np.nanargmax(ratio))
+    return {"phi_peak_deg": friction_angle(ratio[i]), "ratio_peak": float(ratio[i]),
+            "axial_strain_at_peak": float(axial[i]), "q_peak": float(np.max(s1 - s3))}  # fmt: skip
+
+
+def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
+    """The means over the rows in the last `window` of axial strain (module docstring): phi_cs_deg
+    from the mean principal stress ratio, phi_cs_spread_deg the standard deviation of the rows'
+    own angles, q_over_p_cs and its spread, window_rows. ValueError where the run spans less than
+    `window` or fewer than 3 rows lie in it (no mean worth reporting)."""
+    axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
+    if len(axial) == 0 or axial.max() - axial.min() < window - _EDGE:
+        reached = axial.max() - axial.min() if len(axial) else 0.0
+        raise ValueError(f"the run reached {reached:.4g} of axial strain, "
+                         f"less than the critical-state window {window:g}")
+    ratio = _ratio(s1, s3)
+    inside = (axial >= axial.max() - window - _EDGE) & np.isfinite(ratio)
+    n = int(inside.sum())
+    if n < 3:
+        raise ValueError(f"{n} rows with a stress ratio in the last {window:g} of axial strain; "
+                         "the critical state needs 3")
+    r, q, p = ratio[inside], (s1 - s3)[inside], ((s1 + 2.0 * s3) / 3.0)[inside]
+    eta = q / p
+    return {"phi_cs_deg": friction_angle(np.mean(r)), "phi_cs_spread_deg": float(np.std(friction_angle(r))),
+            "q_over_p_cs": float(np.mean(eta)), "q_over_p_cs_spread": float(np.std(eta)), "window_rows": n}  # fmt: skip
+
+
+def bolton_dilatancy(slope):
+    """Bolton's triaxial dilatancy angle (degrees) of d eps_v / d eps_a (compression positive):
+    sin(psi) = -slope / (2 - slope)."""
+    s = np.asarray(slope, dtype=float)
+    psi = np.degrees(np.arcsin(-s / (2.0 - s)))
+    return float(psi) if psi.ndim == 0 else psi
+
+
+def dilatancy_slopes(axial, volumetric, window: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares slopes d eps_v / d eps_a over windows of `window` axial strain centred on each
+    row whose whole window lies inside the run (a window cut short by the run's ends would weigh
+    its few rows as much as a full one): (centres, slopes). ValueError where no window fits."""
+    order = np.argsort(np.asarray(axial, dtype=float), kind="stable")
+    a, v = np.asarray(axial, dtype=float)[order], np.asarray(volumetric, dtype=float)[order]
+    half = 0.5 * window
+    centres, slopes = [], []
+    for c in a[(a >= a[0] + half - _EDGE) & (a <= a[-1] - half + _EDGE)] if len(a) else []:
+        lo, hi = np.searchsorted(a, c - half - _EDGE, "left"), np.searchsorted(a, c + half + _EDGE, "right")
+        x, y = a[lo:hi] - c, v[lo:hi]
+        dx = x - x.mean()
+        if hi - lo < 3 or not np.any(dx):
+            continue
+        centres.append(c)
+        slopes.append(float(dx @ (y - y.mean()) / (dx @ dx)))
+    if not slopes:
+        span = a[-1] - a[0] if len(a) else 0.0
+        raise ValueError(f"no window of {window:g} axial strain with 3 rows fits in the run's {span:.4g}")
+    return np.array(centres), np.array(slopes)
+
+
+def dilatancy_angle(axial, volumetric, window: float = 0.02) -> dict:
+    """The largest Bolton dilatancy angle over the test (module docstring) and the axial strain at
+    its window's centre; negative where the sample only contracted."""
+    centres, slopes = dilatancy_slopes(axial, volumetric, window)
+    i = int(np.argmin(slopes))  # dilation: eps_v falling; psi grows as the slope falls
+    return {"dilatancy_angle_deg": bolton_dilatancy(slopes[i]), "axial_strain_at_max_dilatancy": float(centres[i])}
+
+
+def secant_modulus_50(axial, q) -> float:
+    """E50 (Pa): half the peak deviator over the axial strain where the deviator first reaches it,
+    linearly interpolated between rows; both measured from the first row (the start of shear,
+    where q is the consolidation's own deviator, not necessarily zero)."""
+    a = np.asarray(axial, dtype=float) - float(axial[0])
+    dq = np.asarray(q, dtype=float) - float(q[0])
+    half = 0.5 * float(np.max(dq))
+    if not half > 0:
+        raise ValueError("the deviator never rose above its value at the start of shear: no E50")
+    j = int(np.argmax(dq >= half))  # the first row at or past half the peak; j > 0 since dq[0] = 0 < half
+    strain = a[j - 1] + (half - dq[j - 1]) / (dq[j] - dq[j - 1]) * (a[j] - a[j - 1])
+    if not strain > 0:
+        raise ValueError(f"the deviator reached half its peak at axial strain {strain:.3g}: no E50")
+    return float(half / strain)
+
+
+def mohr_coulomb_fit(sigma_3, sigma_1) -> dict:
+    """The Mohr-Coulomb envelope through one failure state per test (module docstring): phi_deg,
+    cohesion_Pa, r2 of the s-t line, n. One test: the cohesionless angle of its ratio, c = 0,
+    r2 NaN. ValueError on stresses that are not finite and positive, or on an envelope no
+    friction angle gives."""
+    s3, s1 = np.atleast_1d(np.asarray(sigma_3, dtype=float)), np.atleast_1d(np.asarray(sigma_1, dtype=float))
+    if s3.shape != s1.shape or s3.ndim != 1 or len(s3) == 0:
+        raise ValueError(f"one sigma_1 per sigma_3 needed, got {s1.shape} and {s3.shape}")
+    for name, values in (("sigma_3", s3), ("sigma_1", s1)):
+        bad = np.flatnonzero(~np.isfinite(values) | (values <= 0))
+        if len(bad):
+            raise ValueError(f"{name} must be finite and positive: test {bad[0]} has {values[bad[0]]!r}")
+    n = len(s3)
+    if n == 1:
+        return {"phi_deg": friction_angle(s1[0] / s3[0]), "cohesion_Pa": 0.0, "r2": float("nan"), "n": 1}
+    s, t = 0.5 * (s1 + s3), 0.5 * (s1 - s3)
+    ds = s - s.mean()
+    if not np.any(ds):
+        raise ValueError("every test failed at the same mean stress s: no envelope slope to fit")
+    slope = float(ds @ (t - t.mean()) / (ds @ ds))
+    intercept = float(t.mean() - slope * s.mean())
+    if not -1.0 < slope < 1.0:
+        raise ValueError(f"the s-t line's slope {slope:.4g} is sin(phi), which must lie in (-1, 1)")
+    phi = np.arcsin(slope)
+    residual = t - (intercept + slope * s)
+    total = float(np.sum((t - t.mean()) ** 2))
+    r2 = 1.0 - float(residual @ residual) / total if total > 0 else float("nan")
+    return {"phi_deg": float(np.degrees(phi)), "cohesion_Pa": intercept / float(np.cos(phi)), "r2": r2, "n": n}
+
+
+def shear_strains(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shear rows (stage == 1) of a triaxial.csv table, with their axial and volumetric strain
+    measured from the first of them."""
+    rows = np.asarray(rows, dtype=float).reshape(-1, len(HEADER))
+    shear = rows[rows[:, HEADER.index("stage")] == SHEAR]
+    if len(shear) == 0:
+        return shear, np.zeros(0), np.zeros(0)
+    axial = shear[:, HEADER.index("axial_strain")]
+    volumetric = shear[:, HEADER.index("volumetric_strain")]
+    return shear, axial - axial[0], volumetric - volumetric[0]
+
+
+def triaxial_figures(rows: np.ndarray) -> dict:
+    """summary.json's measures from the frames (rows: columns of HEADER), over the shear rows: peak,
+    critical_state, dilatancy_angle, E50_Pa and max_inertia_number (over the frames where it is
+    finite). A measure the run cannot give (too short, no shear at all) is reported as its
+    `*_error` string instead of failing the run's summary."""
+    shear, axial, volumetric = shear_strains(rows)
+    out: dict = {"shear_rows": len(shear)}
+    if len(shear) < 2:
+        out["shear_error"] = f"{len(shear)} shear frames: no triaxial measure"
+        return out
+    s1, s3 = shear[:, HEADER.index("sigma_1")], shear[:, HEADER.index("sigma_3")]
+    for name, measure in (("peak", lambda: peak(axial, s1, s3)),
+                          ("critical_state", lambda: critical_state(axial, s1, s3)),
+                          ("dilatancy", lambda: dilatancy_angle(axial, volumetric)),
+                          ("E50", lambda: {"E50_Pa": secant_modulus_50(axial, s1 - s3)})):  # fmt: skip
+        try:
+            out.update(measure())
+        except ValueError as error:
+            out[f"{name}_error"] = str(error)
+    inertia = shear[:, HEADER.index("inertia_number")]
+    finite = inertia[np.isfinite(inertia)]
+    out["max_inertia_number"] = float(finite.max()) if len(finite) else None
+    return out
+
+
+def _eta(ratio):
+    """q / p of a principal stress ratio R under sigma_2 = sigma_3: 3 (R - 1) / (R + 2)."""
+    return 3.0 * (ratio - 1.0) / (ratio + 2.0)
+
+
+def plot_triaxial(rows: np.ndarray, path: Path, title: str, marks: dict | None = None) -> None:
+    """triaxial.png: q/p (top) and the volumetric strain, dilation up (bottom), against the axial
+    strain of the shear rows; the critical-state q/p dashed and the peak marked where `marks`
+    (triaxial_figures' dict) has them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    marks = marks or {}
+    shear, axial, volumetric = shear_strains(rows)
+    q, p = shear[:, HEADER.index("q")], shear[:, HEADER.index("p")]
+    eta = np.divide(q, p, out=np.full(len(q), np.nan), where=p > 0)
+    fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.4, 6.4))
+    ax[0].plot(axial * 100, eta, "-", color="C0", lw=1)
+    if marks.get("q_over_p_cs") is not None:
+        ax[0].axhline(marks["q_over_p_cs"], color="k", ls="--", lw=1,
+                      label=f"critical state q/p = {marks['q_over_p_cs']:.3g}")  # fmt: skip
+    if marks.get("axial_strain_at_peak") is not None and marks.get("ratio_peak") is not None:
+        phi = f", phi = {marks['phi_peak_deg']:.1f} deg" if marks.get("phi_peak_deg") is not None else ""
+        ax[0].plot(marks["axial_strain_at_peak"] * 100, _eta(marks["ratio_peak"]), "o", color="C3", ms=5,
+                   label=f"peak{phi}")  # fmt: skip
+    ax[0].set(ylabel="stress ratio q/p", title=title)
+    ax[1].plot(axial * 100, -volumetric * 100, "-", color="C1", lw=1)
+    ax[1].axhline(0.0, color="0.5", lw=0.6)
+    ax[1].set(xlabel="axial strain from the start of shear (%)", ylabel="volumetric strain (%), dilation up")
+    for a in ax:
+        a.grid(alpha=0.3)
+    if ax[0].get_legend_handles_labels()[0]:
+        ax[0].legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_envelope(sigma_3, sigma_1, fit: dict, path: Path, title: str) -> None:
+    """envelope.png: each test's Mohr circle at failure and the fitted envelope tau = c + sigma
+    tan(phi), in kPa, for a sweep over confining stresses."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s3 = np.atleast_1d(np.asarray(sigma_3, dtype=float)) / 1e3  # kPa on the axes
+    s1 = np.atleast_1d(np.asarray(sigma_1, dtype=float)) / 1e3
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    angle = np.linspace(0.0, np.pi, 181)
+    for k, (a, b) in enumerate(zip(s3, s1)):
+        centre, radius = 0.5 * (a + b), 0.5 * (b - a)
+        ax.plot(centre + radius * np.cos(angle), radius * np.sin(angle), "-", color=f"C{k % 10}", lw=1,
+                label=f"sigma_3 = {a:g} kPa")  # fmt: skip
+    sigma = np.linspace(0.0, 1.05 * float(np.max(s1)) if len(s1) else 1.0, 50)
+    phi, c = np.radians(fit["phi_deg"]), fit["cohesion_Pa"] / 1e3
+    ax.plot(sigma, c + sigma * np.tan(phi), "k--", lw=1,
+            label=f"envelope: phi = {fit['phi_deg']:.1f} deg, c = {c:.3g} kPa")  # fmt: skip
+    ax.set(xlabel="normal stress sigma (kPa)", ylabel="shear stress tau (kPa)", title=title)
+    ax.set_aspect("equal", adjustable="datalim")  # circles look like circles
+    ax.set_ylim(bottom=0.0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
