@@ -14,6 +14,7 @@ DROP = tomllib.loads(example_text("drop"))
 PILE = tomllib.loads(example_text("pile"))
 COMPRESSION = tomllib.loads(example_text("grain_compression"))
 LID = tomllib.loads(example_text("paper-compression"))
+TRIAXIAL = tomllib.loads(example_text("triaxial"))
 
 
 def dump(value) -> str:
@@ -184,6 +185,12 @@ CONFIG_CASES = [
     ("compression: a billion load steps", COMPRESSION, setter("loading.steps", 10**9),
      "loading.steps: must be from 1 to 100,000"),
     ("compression: a billion iterations", COMPRESSION, setter("solver.max_iterations", 10**9), "solver.max_iterations"),
+    ("triaxial: no confining stress", TRIAXIAL, lambda c: c["consolidation"].pop("stress"), "consolidation.stress"),
+    ("triaxial: negative confining stress", TRIAXIAL, setter("consolidation.stress", -50e3),
+     "consolidation.stress: must be in (0, 1e9] Pa"),
+    ("triaxial: nan confining stress", TRIAXIAL, setter("consolidation.stress", float("nan")), "consolidation.stress"),
+    ("triaxial: strain past the sample", TRIAXIAL, setter("shear.max_strain", 1.5), "shear.max_strain"),
+    ("triaxial: not quasi-static", TRIAXIAL, setter("shear.inertia_number", 0.5), "shear.inertia_number"),
 ]
 
 

@@ -112,6 +112,16 @@ def reduce_oedometer(raw):
                         "output": {"every": 2e-3, "vtk": False}})  # fmt: skip
 
 
+def reduce_triaxial(raw):
+    # a few grains, a low confining stress reached fast, a short shear: the files, both stages
+    return merged(raw, {"pack": {"n_grains": 6, "grains": {"size": 1.2e-3, "vertices": 8},
+                                 "box": {"width": 3.2e-3, "depth": 3.2e-3}},
+                        "consolidation": {"stress": 2e3, "max_time": 0.01},
+                        "shear": {"max_strain": 0.02, "inertia_number": 1e-2, "max_time": 0.01},
+                        "servo": {"inertia_number": 1e-2}, "sample": {"gap": 0.01},
+                        "output": {"every": 2e-3, "vtk": False}})  # fmt: skip
+
+
 REDUCTIONS = {
     "drop": reduce_scene,
     "grain_compression": reduce_grain_compression,
@@ -131,6 +141,8 @@ REDUCTIONS = {
     "pile-flexible": reduce_pile_collapse,
     "poured-heap": reduce_poured_heap,
     "tilting-box": reduce_tilting_box,
+    "triaxial": reduce_triaxial,
+    "triaxial-flexible": reduce_triaxial,
 }
 
 # examples whose reduction depends on their settled [pack]: (raw, pack state) -> raw, applied after
@@ -156,6 +168,7 @@ OUTPUTS = {
     "poured_heap": ["heap.png", "heap_3d.png", "state.npz", "history.csv", "grains.csv", "walls.csv"],
     "tilting_box": ["tilt.png", "tilt_3d.png", "tilt.json", "state.npz", "history.csv", "grains.csv", "walls.csv"],
     "oedometer": ["oedometer.csv", "fabric.csv"],
+    "triaxial": ["triaxial.csv", "triaxial.png", "fabric.csv"],
 }  # fmt: skip
 
 # summary numbers each scenario must report as finite numbers (not null) even reduced
@@ -168,6 +181,7 @@ FINITE = {
     "poured_heap": ["pile_height"],
     "tilting_box": ["fill_height_grains"],
     "oedometer": [],
+    "triaxial": [],
 }
 
 
@@ -253,6 +267,13 @@ def test_every_example_runs_reduced(gallery, name):
         sigma_v = np.atleast_1d(rows["sigma_v"])
         assert len(sigma_v) >= 2 and np.all(np.isfinite(sigma_v))
         assert len(on_disk["stages"]) == 2
+        assert all(s["end_reason"] in ("reached", "max_time", "max_strain") for s in on_disk["stages"]), on_disk["stages"]
+        return
+
+    if scenario == "triaxial":  # its files, finite stresses, and both stages ended (at their targets or limits)
+        rows = np.genfromtxt(out / "triaxial.csv", delimiter=",", names=True)
+        assert np.all(np.isfinite(rows["sigma_3"])) and set(np.unique(rows["stage"])) == {0.0, 1.0}
+        assert [s["name"] for s in on_disk["stages"]] == ["consolidation", "shear"]
         assert all(s["end_reason"] in ("reached", "max_time", "max_strain") for s in on_disk["stages"]), on_disk["stages"]
         return
 

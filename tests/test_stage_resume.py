@@ -26,7 +26,15 @@ CONFIGS = {
                   "output": {"every": 2e-3, "vtk": False}, "lid": {"gap": 0.01}, "servo": {"inertia_number": 1e-2},
                   "stages": [{"stress": 200.0, "max_time": 0.03}, {"stress": 400.0, "max_time": 0.01},
                              {"stress": 200.0, "max_time": 0.01}]},
+    # cut in the shear, the platen pressing the sample and the lateral servos holding it
+    "triaxial": {"scenario": "triaxial", "pack": {"n_grains": 12, "seed": 3, "mu_s": 0.0, "mu_d": 0.0,
+                                                  "grains": {"size": 1.0e-3, "vertices": 8},
+                                                  "box": {"width": 2.6e-3, "depth": 2.6e-3}},
+                 "model": {"grains": "rigid"}, "solver": {"integrator": "explicit"},
+                 "consolidation": {"stress": 20e3, "max_time": 0.05}, "shear": {"max_strain": 0.04,
+                 "inertia_number": 2e-3}, "servo": {"inertia_number": 2e-3}, "output": {"every": 1e-3, "vtk": False}},
 }  # fmt: skip
+LOADED = {"oedometer": ("oedometer.csv", "lid_force"), "triaxial": ("triaxial.csv", "sigma_1")}
 STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
 
 
@@ -55,8 +63,9 @@ def _same_results(a, b):
         for name in STAGE_FILES:
             mine = b / stage.relative_to(a) / name
             assert mine.read_bytes() == (stage / name).read_bytes(), f"{stage.relative_to(a) / name} differs"
-    if (a / "oedometer.csv").is_file():
-        assert (b / "oedometer.csv").read_bytes() == (a / "oedometer.csv").read_bytes(), "oedometer.csv differs"
+    for name in ("oedometer.csv", "triaxial.csv"):
+        if (a / name).is_file():
+            assert (b / name).read_bytes() == (a / name).read_bytes(), f"{name} differs"
     s1, s2 = (json.loads((d / "summary.json").read_text()) for d in (a, b))
     for key in ("wall_seconds", "wall_seconds_total", "initial_state"):
         s1.pop(key), s2.pop(key)
@@ -71,12 +80,13 @@ def test_a_run_killed_in_either_stage_resumes_to_the_same_bits(tmp_path, monkeyp
     in_pack = written.count("pack")
     in_main = len(written) - in_pack
     assert in_pack >= 3 and in_main >= 3, written  # both stages have frames to cut between
-    # the oedometer is cut in its second stage, the lid pressing the grains
-    late = scenario == "oedometer"
+    # the lab tests are cut in their second stage, the lid or the platen pressing the grains
+    late = scenario in LOADED
     if late:
-        rows = np.genfromtxt(tmp_path / "whole" / "oedometer.csv", delimiter=",", names=True)
+        table, force = LOADED[scenario]
+        rows = np.genfromtxt(tmp_path / "whole" / table, delimiter=",", names=True)
         cut = in_main * 3 // 4
-        assert rows["stage"][cut - 1] >= 1 and rows["lid_force"][cut - 1] > 0, "the cut must find the lid loaded"
+        assert rows["stage"][cut - 1] >= 1 and rows[force][cut - 1] > 0, "the cut must find the sample loaded"
     for name, stop_at in (("cut-in-pack", in_pack // 2 + 1), ("cut-in-main", in_pack + (cut if late else 2))):
         _checkpoints(monkeypatch, stop_at)
         with pytest.raises(KeyboardInterrupt):

@@ -7,7 +7,8 @@
     vemdem sweep CONFIG.toml --set KEY=V1,V2,... [--set ...] [--zip] --out DIR
                                          run one case per parameter set in parallel on Dask
                                          (a local cluster, or --scheduler ADDRESS); writes
-                                         DIR/case_*/, DIR/sweep.csv and DIR/sweep.png
+                                         DIR/case_*/, DIR/sweep.csv and DIR/sweep.png (and a
+                                         triaxial sweep over consolidation.stress: envelope.png)
 
 Exit status: 0 done, 2 bad config (one line naming the key), 1 the run failed (the message
 names the cause; results written so far stay in DIR). A sweep exits 0 when some cases failed
@@ -39,7 +40,8 @@ KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "histor
                  "grains.pvd", "grains", "grain.pvd", "grain", "state.npz", "pile.png", "pile_3d.png", "pack_3d.png",
                  "force_strain.csv", "force_strain.png", "fluctuations.csv", "fluctuations.png",
                  "heap.png", "heap_3d.png", "tilt.png", "tilt_3d.png", "tilt.json", "pack",
-                 "reequilibrate", "oedometer.csv", "oedometer.png", "fabric_rose_stages.png", "roses")  # fmt: skip
+                 "reequilibrate", "oedometer.csv", "oedometer.png", "fabric_rose_stages.png", "roses",
+                 "triaxial.csv", "triaxial.png")  # fmt: skip
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -302,6 +304,7 @@ def cmd_sweep(args) -> int:
         print(f"vemdem: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     table = out / "sweep.csv"
+    envelope = sweep.add_envelopes(cases, results, out / "envelope.png")
     sweep.write_table(table, cases, results)
     note = sweep.plot_sweep(out / "sweep.png", cases, results, args.zip, args.plot_x, args.plot_y)
     failed = sum(result["status"] != "ok" for result in results)
@@ -309,6 +312,8 @@ def cmd_sweep(args) -> int:
         print(f"vemdem: {failed} of {len(cases)} cases failed; their errors are in {table}", file=sys.stderr)
     if not args.quiet:
         print(note)
+        if envelope:
+            print(envelope)
         print(f"sweep: {len(cases)} cases, {len(cases) - failed} ok, {failed} failed; results in {table}")
     return 1 if failed == len(cases) else 0
 

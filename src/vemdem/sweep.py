@@ -454,6 +454,62 @@ def write_table(path: Path, cases: list[Case], results: list[dict]) -> None:
         writer.writerows(extra)
 
 
+def envelope_of(cases: list[Case]) -> dict | None:
+    """The scenario's ENVELOPE (scenarios.triaxial), None for a scenario without one."""
+    if not cases or not isinstance(cases[0].raw.get("scenario"), str):
+        return None
+    return getattr(scenario_module(cases[0].raw["scenario"]), "ENVELOPE", None)
+
+
+def envelope_groups(cases: list[Case], results: list[dict]) -> tuple[str, dict[tuple, list[int]]] | None:
+    """The cases whose failure states make one strength envelope: those of a sweep over the
+    scenario's ENVELOPE_KEY (a triaxial's confining stress) that share every other swept value,
+    the seed included (one envelope per seed: the spread over seeds is the envelopes'). None where
+    the scenario has no envelope or the sweep does not vary its key."""
+    envelope = envelope_of(cases)
+    key = envelope["key"] if envelope else None
+    if key is None or key not in cases[0].params:
+        return None
+    others = [k for k in cases[0].params if k != key]
+    groups: dict[tuple, list[int]] = {}
+    for i, (case, result) in enumerate(zip(cases, results)):
+        if result.get("status") == "ok":
+            groups.setdefault(tuple(case.params[k] for k in others), []).append(i)
+    return key, groups
+
+
+def add_envelopes(cases: list[Case], results: list[dict], figure: Path) -> str | None:
+    """Add each case's envelope (the scenario's `envelopes` of its group's summaries) to its
+    result, and draw the envelopes, seeds pooled, into `figure`; a line saying what was done, or
+    None where the sweep has no envelope."""
+    grouped = envelope_groups(cases, results)
+    if grouped is None:
+        return None
+    key, groups = grouped
+    envelope = envelope_of(cases)
+    for members in groups.values():
+        fit = envelope["fit"]([results[i] for i in members])
+        for i in members:
+            results[i].update(fit)
+    pooled: dict[tuple, list[int]] = {}
+    names = [k for k in cases[0].params if k != key]
+    for setting, members in groups.items():
+        pooled.setdefault(tuple(v for k, v in zip(names, setting) if k != SEED), []).extend(members)
+    labels = [k for k in names if k != SEED]
+    panels = []
+    for setting, members in pooled.items():
+        fit = envelope["fit"]([results[i] for i in members])
+        if "envelope_phi_peak_deg" not in fit:
+            continue
+        title = ", ".join(f"{k}={_label(v)}" for k, v in zip(labels, setting)) or f"over {key}"
+        panels.append(envelope["panel"](title, [results[i] for i in members], fit))
+    if not panels:
+        figure.unlink(missing_ok=True)
+        return f"no envelope: no set of cases over {key} gave one (envelope_*_error in sweep.csv)"
+    envelope["plot"](panels, figure)
+    return f"envelope: {figure} (Mohr-Coulomb over {key}, {len(panels)} panel{'s' * (len(panels) > 1)})"
+
+
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 

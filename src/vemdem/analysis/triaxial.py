@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 HEADER = ("time", "stage", "axial_strain", "volumetric_strain", "sigma_1", "sigma_3", "q", "p", "void_ratio",
-          "coordination", "fabric_anisotropy", "inertia_number")  # fmt: skip
+          "coordination", "fabric_anisotropy", "inertia_number", "sigma_1_contacts", "sigma_3_contacts")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
 
 # Rows whose axial strain lies on a window's edge count as inside it: the strains are sums of
@@ -69,8 +69,8 @@ def _ratio(sigma_1, sigma_3) -> np.ndarray:
 
 
 def peak(axial, sigma_1, sigma_3) -> dict:
-    """The peak of the principal stress ratio (phi_peak_deg, ratio_peak, axial_strain_at_peak) and
-    the largest deviator q_peak. With sigma_3 held by the servos the two peaks coincide up to its
+    """The peak of the principal stress ratio (phi_peak_deg, ratio_peak, axial_strain_at_peak, and
+    the principal stresses there: one failure state of an envelope) and the largest deviator q_peak. With sigma_3 held by the servos the two peaks coincide up to its
     noise; q_peak is the deviator's own maximum, the one E50 halves."""
     axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
     ratio = _ratio(s1, s3)
@@ -78,14 +78,17 @@ def peak(axial, sigma_1, sigma_3) -> dict:
         raise ValueError("no row with a positive sigma_3: no stress ratio to find a peak of")
     i = int(np.nanargmax(ratio))
     return {"phi_peak_deg": friction_angle(ratio[i]), "ratio_peak": float(ratio[i]),
-            "axial_strain_at_peak": float(axial[i]), "q_peak": float(np.max(s1 - s3))}  # fmt: skip
+            "axial_strain_at_peak": float(axial[i]), "q_peak": float(np.max(s1 - s3)),
+            "sigma_1_peak_Pa": float(s1[i]), "sigma_3_peak_Pa": float(s3[i])}  # fmt: skip
 
 
 def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
     """The means over the rows in the last `window` of axial strain (module docstring): phi_cs_deg
     from the mean principal stress ratio, phi_cs_spread_deg the standard deviation of the rows'
-    own angles, q_over_p_cs and its spread, window_rows. ValueError where the run spans less than
-    `window` or fewer than 3 rows lie in it (no mean worth reporting)."""
+    own angles, q_over_p_cs and its spread, window_rows, and the mean principal stresses
+    sigma_1_cs_Pa and sigma_3_cs_Pa (the critical state's failure state for an envelope).
+    ValueError where the run spans less than `window` or fewer than 3 rows lie in it (no mean
+    worth reporting)."""
     axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
     if len(axial) == 0 or axial.max() - axial.min() < window - _EDGE:
         reached = axial.max() - axial.min() if len(axial) else 0.0
@@ -100,7 +103,8 @@ def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
     r, q, p = ratio[inside], (s1 - s3)[inside], ((s1 + 2.0 * s3) / 3.0)[inside]
     eta = q / p
     return {"phi_cs_deg": friction_angle(np.mean(r)), "phi_cs_spread_deg": float(np.std(friction_angle(r))),
-            "q_over_p_cs": float(np.mean(eta)), "q_over_p_cs_spread": float(np.std(eta)), "window_rows": n}  # fmt: skip
+            "q_over_p_cs": float(np.mean(eta)), "q_over_p_cs_spread": float(np.std(eta)), "window_rows": n,
+            "sigma_1_cs_Pa": float(np.mean(s1[inside])), "sigma_3_cs_Pa": float(np.mean(s3[inside]))}  # fmt: skip
 
 
 def bolton_dilatancy(slope):
@@ -131,6 +135,13 @@ def dilatancy_slopes(axial, volumetric, window: float = 0.02) -> tuple[np.ndarra
         span = a[-1] - a[0] if len(a) else 0.0
         raise ValueError(f"no window of {window:g} axial strain with 3 rows fits in the run's {span:.4g}")
     return np.array(centres), np.array(slopes)
+
+
+def dilatancy_window(axial, window: float = 0.02, rows: int = 4) -> float:
+    """`window` of axial strain, widened to hold `rows` frames where the frames are further apart
+    (a coarse output interval would otherwise leave no window a slope can be fitted over)."""
+    steps = np.diff(np.sort(np.asarray(axial, dtype=float)))
+    return max(window, rows * float(np.median(steps))) if len(steps) else window
 
 
 def dilatancy_angle(axial, volumetric, window: float = 0.02) -> dict:
@@ -212,7 +223,7 @@ def triaxial_figures(rows: np.ndarray) -> dict:
     s1, s3 = shear[:, HEADER.index("sigma_1")], shear[:, HEADER.index("sigma_3")]
     for name, measure in (("peak", lambda: peak(axial, s1, s3)),
                           ("critical_state", lambda: critical_state(axial, s1, s3)),
-                          ("dilatancy", lambda: dilatancy_angle(axial, volumetric)),
+                          ("dilatancy", lambda: dilatancy_angle(axial, volumetric, dilatancy_window(axial))),
                           ("E50", lambda: {"E50_Pa": secant_modulus_50(axial, s1 - s3)})):  # fmt: skip
         try:
             out.update(measure())
@@ -264,31 +275,72 @@ def plot_triaxial(rows: np.ndarray, path: Path, title: str, marks: dict | None =
     plt.close(fig)
 
 
-def plot_envelope(sigma_3, sigma_1, fit: dict, path: Path, title: str) -> None:
-    """envelope.png: each test's Mohr circle at failure and the fitted envelope tau = c + sigma
-    tan(phi), in kPa, for a sweep over confining stresses."""
-    import matplotlib
+# the failure states a sweep's envelopes go through: (name, summary key of sigma_3, of sigma_1)
+FAILURE_STATES = (("peak", "sigma_3_peak_Pa", "sigma_1_peak_Pa"), ("cs", "sigma_3_cs_Pa", "sigma_1_cs_Pa"))
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
+def _failure_stresses(summaries: list[dict], s3_key: str, s1_key: str) -> tuple[np.ndarray, np.ndarray]:
+    """The tests' principal stresses at one failure state, the tests that did not reach it left out."""
+    have = [s for s in summaries if isinstance(s.get(s3_key), float) and isinstance(s.get(s1_key), float)]
+    return np.array([s[s3_key] for s in have]), np.array([s[s1_key] for s in have])
+
+
+def envelopes(summaries: list[dict]) -> dict:
+    """The Mohr-Coulomb envelopes through a set of triaxial tests' summaries (one per confining
+    stress), at the peak and at the critical state: envelope_phi_{peak,cs}_deg,
+    envelope_cohesion_{peak,cs}_Pa, envelope_r2_{peak,cs} and envelope_tests_{peak,cs}; an
+    envelope that cannot be fitted is reported as envelope_{peak,cs}_error."""
+    out: dict = {}
+    for name, s3_key, s1_key in FAILURE_STATES:
+        s3, s1 = _failure_stresses(summaries, s3_key, s1_key)
+        try:
+            fit = mohr_coulomb_fit(s3, s1)
+        except ValueError as error:
+            out[f"envelope_{name}_error"] = str(error)
+            continue
+        out.update({f"envelope_phi_{name}_deg": fit["phi_deg"], f"envelope_cohesion_{name}_Pa": fit["cohesion_Pa"],
+                    f"envelope_r2_{name}": fit["r2"], f"envelope_tests_{name}": fit["n"]})  # fmt: skip
+    return out
+
+
+def _draw_envelope(ax, sigma_3, sigma_1, fit: dict, title: str, cs_fit: dict | None = None) -> None:
     s3 = np.atleast_1d(np.asarray(sigma_3, dtype=float)) / 1e3  # kPa on the axes
     s1 = np.atleast_1d(np.asarray(sigma_1, dtype=float)) / 1e3
-    fig, ax = plt.subplots(figsize=(7, 4.2))
     angle = np.linspace(0.0, np.pi, 181)
     for k, (a, b) in enumerate(zip(s3, s1)):
         centre, radius = 0.5 * (a + b), 0.5 * (b - a)
         ax.plot(centre + radius * np.cos(angle), radius * np.sin(angle), "-", color=f"C{k % 10}", lw=1,
                 label=f"sigma_3 = {a:g} kPa")  # fmt: skip
     sigma = np.linspace(0.0, 1.05 * float(np.max(s1)) if len(s1) else 1.0, 50)
-    phi, c = np.radians(fit["phi_deg"]), fit["cohesion_Pa"] / 1e3
-    ax.plot(sigma, c + sigma * np.tan(phi), "k--", lw=1,
-            label=f"envelope: phi = {fit['phi_deg']:.1f} deg, c = {c:.3g} kPa")  # fmt: skip
+    for f, style, what in ((fit, "k--", "peak"), (cs_fit, "k:", "critical state")):
+        if f is not None:
+            phi, c = np.radians(f["phi_deg"]), f["cohesion_Pa"] / 1e3
+            ax.plot(sigma, c + sigma * np.tan(phi), style, lw=1,
+                    label=f"{what}: phi = {f['phi_deg']:.1f} deg, c = {c:.3g} kPa")  # fmt: skip
     ax.set(xlabel="normal stress sigma (kPa)", ylabel="shear stress tau (kPa)", title=title)
     ax.set_aspect("equal", adjustable="datalim")  # circles look like circles
     ax.set_ylim(bottom=0.0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
+
+
+def plot_envelope(sigma_3, sigma_1, fit: dict, path: Path, title: str) -> None:
+    """envelope.png: each test's Mohr circle at failure and the fitted envelope tau = c + sigma
+    tan(phi), in kPa, for a sweep over confining stresses."""
+    plot_envelopes([(title, sigma_3, sigma_1, fit, None)], path)
+
+
+def plot_envelopes(panels: list[tuple], path: Path) -> None:
+    """One panel per (title, sigma_3, sigma_1, peak fit, critical-state fit or None): the peak
+    states' Mohr circles and both envelopes; a sweep's envelope.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 4.2), squeeze=False)
+    for ax, (title, s3, s1, fit, cs_fit) in zip(axes[0], panels):
+        _draw_envelope(ax, s3, s1, fit, title, cs_fit)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

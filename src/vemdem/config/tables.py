@@ -574,6 +574,40 @@ OEDOMETER = {
 OEDOMETER["solver"] = SOLVER
 OEDOMETER["contact"] = with_defaults(OEDOMETER["contact"], damping_ratio=0.05)  # as the lid cycle's: elastic contacts
 
+TRIAXIAL = {
+    "scenario": Field(("triaxial",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "sample": {
+        "gap": Field(float, 0.05, _in(0, 10, lo_open=True),
+                     "the top platen starts this many mean grain sizes above the pack's highest point"),
+    },
+    "consolidation": {
+        "stress": Field(float, REQUIRED, _stress, "the confining stress (Pa): on all five moving walls, then on the "
+                        "four lateral ones while the sample is sheared"),
+        "max_time": Field(float, 1.0, positive, "consolidation ends after this much simulated time, reached or not (s)"),
+    },
+    "shear": {
+        "max_strain": Field(float, 0.25, open_unit_interval, "the axial strain (from the consolidated sample) the "
+                            "platen compresses it to"),
+        "inertia_number": Field(float, 5e-4, _in(0, 1e-2, lo_open=True),
+                                "sets the platen's constant speed: the axial strain rate that gives this inertia "
+                                "number at the confining stress, rate = I sqrt(sigma_3 / rho) / d"),
+        "max_time": Field(float, 10.0, positive, "shearing ends after this much simulated time in any case (s)"),
+    },
+    "servo": SERVO,
+    **granular_tables(mu_s=0.3, mu_d=0.3, every=5e-3),
+}
+# As the oedometer's: implicit Newmark at the real density by default; the rigid grains with
+# `[model] grains = "rigid"`
+TRIAXIAL["solver"] = SOLVER
+TRIAXIAL["contact"] = with_defaults(TRIAXIAL["contact"], damping_ratio=0.05)
+# the law is set for the test's load, not the grains' weight (scenarios/triaxial.contact_at_stress)
+TRIAXIAL["contact"]["reference_force"] = replace(
+    TRIAXIAL["contact"]["reference_force"],
+    doc="N, force per contact at the switch gap [2 x consolidation.stress x the mean grain size squared: "
+        "about the force per contact at a sheared sample's mean stress]")  # fmt: skip
+
 
 # -------------------------------------------------------------------------------- cross-field rules
 def check_rules(cfg: dict) -> None:

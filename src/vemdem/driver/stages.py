@@ -29,6 +29,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 
+class StageNotReached(UserWarning):
+    """A stage ended at its time or strain limit, not at its target."""
+
+
 @dataclass(frozen=True)
 class Stage:
     stress: float  # target normal stress on the servo wall (Pa)
@@ -134,11 +138,11 @@ class LoadPath:
     def _ended(self, stage: Stage, rec: StageRecord, state, info) -> str:
         servo = self.servo
         if abs(servo.stress - stage.stress) <= self.stress_tolerance * stage.stress:
-            rec.unbalanced = unbalanced_force(state.a, self.lumped, self.vertex_ptr, info.contact)
+            rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
             if rec.unbalanced <= self.unbalanced_tolerance:
                 return "reached"
         if state.t - rec.start_time >= stage.max_time:
-            rec.unbalanced = unbalanced_force(state.a, self.lumped, self.vertex_ptr, info.contact)
+            rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
             return "max_time"
         if rec.loading and self.strain(state) > stage.max_strain:
             return "max_strain"
@@ -147,13 +151,13 @@ class LoadPath:
     # ---------------------------------------------------------------- checkpoints
     def carried(self) -> dict:
         return {"servo": self.servo.carried(), "current": self.current,
-                "records": [_jsonable(asdict(r)) for r in self.records],
+                "records": [jsonable(asdict(r)) for r in self.records],
                 "last": None if self._last is None else list(self._last)}  # fmt: skip
 
     def carry_on(self, carried: dict) -> None:
         self.current = int(carried["current"])
         self.servo.carry_on(carried["servo"])
-        self.records = [StageRecord(**_floats(r)) for r in carried["records"]]  # at_end: a dict of floats
+        self.records = [StageRecord(**from_jsonable(r)) for r in carried["records"]]  # at_end: a dict of floats
         self._last = None if carried["last"] is None else tuple(carried["last"])
 
     def stage_records(self) -> list[dict]:
@@ -161,23 +165,27 @@ class LoadPath:
         for r in self.records:
             d = asdict(r)
             extra = d.pop("at_end")
-            out.append(_jsonable({**d, **extra, "loading": r.loading}))
+            out.append(jsonable({**d, **extra, "loading": r.loading}))
         return out
 
 
-def unbalanced_force(a: np.ndarray, lumped: np.ndarray, vertex_ptr: np.ndarray, contact) -> float:
+def unbalanced_force(state, lumped: np.ndarray, vertex_ptr: np.ndarray, contact) -> float:
     """Mean |net force| over the grains over the mean |contact force| over the records (module
-    docstring); inf where no record carries a force."""
-    net = np.add.reduceat(lumped[:, None] * a, vertex_ptr[:-1], axis=0)
+    docstring); inf where no record carries a force. Rigid grains carry their net force in the
+    state (`bodies["force"]`; their vertices' accelerations are not kept)."""
+    if "force" in state.bodies:
+        net = state.bodies["force"]
+    else:
+        net = np.add.reduceat(lumped[:, None] * state.a, vertex_ptr[:-1], axis=0)
     forces = np.linalg.norm(contact.pair_force, axis=1) if contact is not None and contact.n_contacts else np.zeros(0)
     scale = float(forces.mean()) if len(forces) else 0.0
     return float(np.linalg.norm(net, axis=1).mean() / scale) if scale > 0 else np.inf
 
 
-def _jsonable(d: dict) -> dict:
+def jsonable(d: dict) -> dict:
     """inf and nan as strings (JSON has neither); everything else as it is."""
     return {k: (repr(float(v)) if isinstance(v, float) and not np.isfinite(v) else v) for k, v in d.items()}
 
 
-def _floats(d: dict) -> dict:
+def from_jsonable(d: dict) -> dict:
     return {k: (float(v) if v in ("inf", "-inf", "nan") else v) for k, v in d.items()}

@@ -45,7 +45,7 @@ from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import PlaneWall, ServoMotion, box_walls
 from ..driver.loop import simulate
-from ..driver.stages import LoadPath, Stage, unbalanced_force
+from ..driver.stages import LoadPath, Stage, StageNotReached, unbalanced_force
 from ..driver.summary import run_summary
 from ..geometry.mass import body_volumes
 from ..io.results import CsvLog, write_json
@@ -60,10 +60,6 @@ SCHEMA = tables.OEDOMETER
 SIDES = ("wall -x", "wall +x", "wall -y", "wall +y")
 # the contact network where each stage ended (normals, normal forces), for fabric_rose_stages.png
 ROSE_FILE = "roses/stage_{}.npz"
-
-
-class StageNotReached(UserWarning):
-    """A stage ended at its time or strain limit, not at its target."""
 
 
 class GrainStrainWarning(UserWarning):
@@ -130,7 +126,7 @@ class Oedometer:
         records = contact.records(self.scene.contact.all_positions(state.x, state.t))
         lw = love_weber_zz(self.scene, state.x, records, total)
         z_m = coordination(records.a, records.b, self.scene.n_grains)["mechanical_coordination"]
-        unbalanced = unbalanced_force(state.a, self.scene.bodies.lumped, self.scene.bodies.vertex_ptr, contact)
+        unbalanced = unbalanced_force(state, self.scene.bodies.lumped, self.scene.bodies.vertex_ptr, contact)
         return [state.t, stage, sigma_v, self.sigma_h(contact.wall_reactions, state.t), 1.0 - h / self.height0,
                 total / solids - 1.0, solids / total, z_m,
                 inertia_number(speed, h, self.grain_size, sigma_v, density), h, speed, force, lw, unbalanced]  # fmt: skip

@@ -17,6 +17,7 @@ SCENARIOS = {
     "poured_heap": "vemdem.scenarios.poured_heap",
     "tilting_box": "vemdem.scenarios.tilting_box",
     "oedometer": "vemdem.scenarios.oedometer",
+    "triaxial": "vemdem.scenarios.triaxial",
 }
 
 EXAMPLES = {
@@ -34,8 +35,9 @@ EXAMPLES = {
 }
 # the paper's own method at the real density (docs/results.md): the same runs, implicit, no mass scaling
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
-# the laboratory tests: implicit at the real density from the start
-EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml"})
+# the laboratory tests, at the real density
+EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml", "triaxial": "triaxial.toml",
+                 "triaxial-flexible": "triaxial-flexible.toml"})
 
 
 def scenario_module(name):
