@@ -15,6 +15,7 @@ PILE = tomllib.loads(example_text("pile"))
 COMPRESSION = tomllib.loads(example_text("grain_compression"))
 LID = tomllib.loads(example_text("paper-compression"))
 TRIAXIAL = tomllib.loads(example_text("triaxial"))
+SHEAR = tomllib.loads(example_text("direct-shear"))
 
 
 def dump(value) -> str:
@@ -191,6 +192,10 @@ CONFIG_CASES = [
     ("triaxial: nan confining stress", TRIAXIAL, setter("consolidation.stress", float("nan")), "consolidation.stress"),
     ("triaxial: strain past the sample", TRIAXIAL, setter("shear.max_strain", 1.5), "shear.max_strain"),
     ("triaxial: not quasi-static", TRIAXIAL, setter("shear.inertia_number", 0.5), "shear.inertia_number"),
+    ("direct shear: no normal stress", SHEAR, lambda c: c["normal"].pop("stress"), "normal.stress"),
+    ("direct shear: negative normal stress", SHEAR, setter("normal.stress", -1.0), "normal.stress"),
+    ("direct shear: split at the floor", SHEAR, setter("sample.split", 0.0), "sample.split"),
+    ("direct shear: travel of a whole box", SHEAR, setter("shear.max_displacement", 1.0), "shear.max_displacement"),
 ]
 
 

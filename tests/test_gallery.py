@@ -122,6 +122,16 @@ def reduce_triaxial(raw):
                         "output": {"every": 2e-3, "vtk": False}})  # fmt: skip
 
 
+def reduce_direct_shear(raw):
+    # a few grains, a low normal stress reached fast, a short shear: the files, both stages
+    return merged(raw, {"pack": {"n_grains": 8, "grains": {"size": 1.2e-3, "vertices": 8},
+                                 "box": {"width": 4.0e-3, "depth": 3.2e-3}},
+                        "normal": {"stress": 2e3, "max_time": 0.01},
+                        "shear": {"max_displacement": 0.05, "inertia_number": 1e-2, "max_time": 0.01},
+                        "servo": {"inertia_number": 1e-2}, "sample": {"gap": 0.01},
+                        "output": {"every": 2e-3, "vtk": False}})  # fmt: skip
+
+
 REDUCTIONS = {
     "drop": reduce_scene,
     "grain_compression": reduce_grain_compression,
@@ -142,6 +152,7 @@ REDUCTIONS = {
     "poured-heap": reduce_poured_heap,
     "tilting-box": reduce_tilting_box,
     "triaxial": reduce_triaxial,
+    "direct-shear": reduce_direct_shear,
     "triaxial-flexible": reduce_triaxial,
 }
 
@@ -169,6 +180,7 @@ OUTPUTS = {
     "tilting_box": ["tilt.png", "tilt_3d.png", "tilt.json", "state.npz", "history.csv", "grains.csv", "walls.csv"],
     "oedometer": ["oedometer.csv", "fabric.csv"],
     "triaxial": ["triaxial.csv", "triaxial.png", "fabric.csv"],
+    "direct_shear": ["shear.csv", "shear.png", "fabric.csv"],
 }  # fmt: skip
 
 # summary numbers each scenario must report as finite numbers (not null) even reduced
@@ -182,6 +194,7 @@ FINITE = {
     "tilting_box": ["fill_height_grains"],
     "oedometer": [],
     "triaxial": [],
+    "direct_shear": [],
 }
 
 
@@ -270,9 +283,10 @@ def test_every_example_runs_reduced(gallery, name):
         assert all(s["end_reason"] in ("reached", "max_time", "max_strain") for s in on_disk["stages"]), on_disk["stages"]
         return
 
-    if scenario == "triaxial":  # its files, finite stresses, and both stages ended (at their targets or limits)
-        rows = np.genfromtxt(out / "triaxial.csv", delimiter=",", names=True)
-        assert np.all(np.isfinite(rows["sigma_3"])) and set(np.unique(rows["stage"])) == {0.0, 1.0}
+    if scenario in ("triaxial", "direct_shear"):  # files, finite stresses, both stages ended (at targets or limits)
+        table, stress = ("triaxial.csv", "sigma_3") if scenario == "triaxial" else ("shear.csv", "sigma_n")
+        rows = np.genfromtxt(out / table, delimiter=",", names=True)
+        assert np.all(np.isfinite(rows[stress])) and set(np.unique(rows["stage"])) == {0.0, 1.0}
         assert [s["name"] for s in on_disk["stages"]] == ["consolidation", "shear"]
         assert all(s["end_reason"] in ("reached", "max_time", "max_strain") for s in on_disk["stages"]), on_disk["stages"]
         return

@@ -33,8 +33,15 @@ CONFIGS = {
                  "model": {"grains": "rigid"}, "solver": {"integrator": "explicit"},
                  "consolidation": {"stress": 20e3, "max_time": 0.05}, "shear": {"max_strain": 0.04,
                  "inertia_number": 2e-3}, "servo": {"inertia_number": 2e-3}, "output": {"every": 1e-3, "vtk": False}},
+    "direct_shear": {"scenario": "direct_shear", "pack": {"n_grains": 20, "seed": 3, "mu_s": 0.0, "mu_d": 0.0,
+                                                          "grains": {"size": 1.0e-3, "vertices": 8},
+                                                          "box": {"width": 3.6e-3, "depth": 2.6e-3}},
+                     "model": {"grains": "rigid"}, "solver": {"integrator": "explicit"},
+                     "normal": {"stress": 20e3, "max_time": 0.05}, "shear": {"max_displacement": 0.05,
+                     "inertia_number": 2e-3}, "servo": {"inertia_number": 2e-3}, "output": {"every": 1e-3, "vtk": False}},
 }  # fmt: skip
-LOADED = {"oedometer": ("oedometer.csv", "lid_force"), "triaxial": ("triaxial.csv", "sigma_1")}
+LOADED = {"oedometer": ("oedometer.csv", "lid_force"), "triaxial": ("triaxial.csv", "sigma_1"),
+          "direct_shear": ("shear.csv", "tau")}
 STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
 
 
@@ -63,7 +70,7 @@ def _same_results(a, b):
         for name in STAGE_FILES:
             mine = b / stage.relative_to(a) / name
             assert mine.read_bytes() == (stage / name).read_bytes(), f"{stage.relative_to(a) / name} differs"
-    for name in ("oedometer.csv", "triaxial.csv"):
+    for name in ("oedometer.csv", "triaxial.csv", "shear.csv"):
         if (a / name).is_file():
             assert (b / name).read_bytes() == (a / name).read_bytes(), f"{name} differs"
     s1, s2 = (json.loads((d / "summary.json").read_text()) for d in (a, b))

@@ -85,7 +85,7 @@ def test_the_law_is_set_for_the_confining_stress(run):
     # the friction springs stay within the contact layer: pairs slide under the test's forces
     assert summary["friction"]["beyond_contact_layer"] is False
     cfg, _ = checked_config({**CONFIG, "contact": {**CONFIG["contact"], "reference_force": 0.5}})
-    assert contact_at_stress(cfg, size)["contact"]["reference_force"] == 0.5
+    assert contact_at_stress(cfg, SIGMA_C, size)["contact"]["reference_force"] == 0.5
 
 
 def test_summary_is_strict_json_with_the_named_keys(run):

@@ -41,7 +41,7 @@ KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "histor
                  "force_strain.csv", "force_strain.png", "fluctuations.csv", "fluctuations.png",
                  "heap.png", "heap_3d.png", "tilt.png", "tilt_3d.png", "tilt.json", "pack",
                  "reequilibrate", "oedometer.csv", "oedometer.png", "fabric_rose_stages.png", "roses",
-                 "triaxial.csv", "triaxial.png")  # fmt: skip
+                 "triaxial.csv", "triaxial.png", "shear.csv", "shear.png")  # fmt: skip
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -70,8 +70,9 @@ def _ratio(sigma_1, sigma_3) -> np.ndarray:
 
 def peak(axial, sigma_1, sigma_3) -> dict:
     """The peak of the principal stress ratio (phi_peak_deg, ratio_peak, axial_strain_at_peak, and
-    the principal stresses there: one failure state of an envelope) and the largest deviator q_peak. With sigma_3 held by the servos the two peaks coincide up to its
-    noise; q_peak is the deviator's own maximum, the one E50 halves."""
+    the principal stresses there: one failure state of an envelope) and the largest deviator
+    q_peak. With sigma_3 held by the servos the two peaks coincide up to its noise; q_peak is the
+    deviator's own maximum, the one E50 halves."""
     axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
     ratio = _ratio(s1, s3)
     if not np.any(np.isfinite(ratio)):

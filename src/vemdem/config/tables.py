@@ -608,6 +608,39 @@ TRIAXIAL["contact"]["reference_force"] = replace(
     doc="N, force per contact at the switch gap [2 x consolidation.stress x the mean grain size squared: "
         "about the force per contact at a sheared sample's mean stress]")  # fmt: skip
 
+DIRECT_SHEAR = {
+    "scenario": Field(("direct_shear",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "sample": {
+        "gap": Field(float, 0.05, _in(0, 10, lo_open=True),
+                     "the lid starts this many mean grain sizes above the pack's highest point"),
+        "split": Field(float, 0.5, _in(0.2, 0.8),
+                       "where the box's halves meet, as a share of the pack's height above the floor"),
+    },
+    "normal": {
+        "stress": Field(float, REQUIRED, _stress, "the normal stress on the lid (Pa), held by its servo"),
+        "max_time": Field(float, 1.0, positive, "the lid's consolidation ends after this much simulated time, "
+                          "reached or not (s)"),
+    },
+    "shear": {
+        "max_displacement": Field(float, 0.15, _in(0.01, 0.5),
+                                  "the lower half's travel, as a share of the box's length along x; below the "
+                                  "smallest grain, so that no grain fits between the halves' walls"),
+        "inertia_number": Field(float, 5e-4, _in(0, 1e-2, lo_open=True),
+                                "sets the lower half's speed: the shear rate (speed / sample height) that gives "
+                                "this inertia number at the normal stress"),
+        "max_time": Field(float, 10.0, positive, "shearing ends after this much simulated time in any case (s)"),
+    },
+    "servo": SERVO,
+    **granular_tables(mu_s=0.3, mu_d=0.3, every=5e-3),
+}
+DIRECT_SHEAR["solver"] = SOLVER
+DIRECT_SHEAR["contact"] = dict(TRIAXIAL["contact"])
+DIRECT_SHEAR["contact"]["reference_force"] = replace(
+    TRIAXIAL["contact"]["reference_force"],
+    doc="N, force per contact at the switch gap [2 x normal.stress x the mean grain size squared]")
+
 
 # -------------------------------------------------------------------------------- cross-field rules
 def check_rules(cfg: dict) -> None:

@@ -18,6 +18,7 @@ SCENARIOS = {
     "tilting_box": "vemdem.scenarios.tilting_box",
     "oedometer": "vemdem.scenarios.oedometer",
     "triaxial": "vemdem.scenarios.triaxial",
+    "direct_shear": "vemdem.scenarios.direct_shear",
 }
 
 EXAMPLES = {
@@ -37,7 +38,7 @@ EXAMPLES = {
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
 # the laboratory tests, at the real density
 EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml", "triaxial": "triaxial.toml",
-                 "triaxial-flexible": "triaxial-flexible.toml"})
+                 "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml"})
 
 
 def scenario_module(name):

@@ -72,7 +72,8 @@ class TriaxialCell:
         hx, hy = 0.5 * self.box[0], 0.5 * self.box[1]
         sides = (((cx - hx, cy), (1.0, 0.0)), ((cx + hx, cy), (-1.0, 0.0)), ((cx, cy - hy), (0.0, 1.0)),
                  ((cx, cy + hy), (0.0, -1.0)))  # fmt: skip
-        self.lateral = [PlaneWall(np.array([x, y, self.floor]), np.array([nx, ny, 0.0]), ServoMotion((nx, ny, 0.0)), name,
+        self.lateral = [PlaneWall(np.array([x, y, self.floor]), np.array([nx, ny, 0.0]), ServoMotion((nx, ny, 0.0)),
+                                  name,
                                   frictionless=True)
                         for ((x, y), (nx, ny)), name in zip(sides, LATERAL)]  # fmt: skip
         self.top = PlaneWall(np.array([cx, cy, self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
@@ -114,7 +115,8 @@ class TriaxialPath:
         self.max_time = (float(consolidation_time), float(shear["max_time"]))
         self.max_strain, self.rate = float(shear["max_strain"]), float(shear_rate)
         self.lumped, self.vertex_ptr = lumped, vertex_ptr
-        self.stress_tolerance, self.unbalanced_tolerance = servo_cfg["stress_tolerance"], servo_cfg["unbalanced_tolerance"]
+        self.stress_tolerance = servo_cfg["stress_tolerance"]
+        self.unbalanced_tolerance = servo_cfg["unbalanced_tolerance"]
         self.current = 0
         self.records: list[StageRecord] = []
         self.start = None  # (t, height, volume) where the current stage began
@@ -147,7 +149,8 @@ class TriaxialPath:
         rec.newton_iterations += int(info.iterations)
         reason = self._ended(rec, state, info)
         if reason:
-            rec.end_time, rec.end_stress, rec.end_strain, rec.end_reason = t, self.servos[-1].stress, self.strains(t)[0], reason
+            rec.end_time, rec.end_stress, rec.end_reason = t, self.servos[-1].stress, reason
+            rec.end_strain = self.strains(t)[0]
             self.current += 1
         self._steer(t)
         rec.largest_speed = max(rec.largest_speed, max(abs(s.motion.speed) for s in self.servos))
@@ -206,14 +209,15 @@ class TriaxialPath:
 REFERENCE_STRESS = 2.0
 
 
-def contact_at_stress(cfg: dict, grain_size: float) -> dict:
+def contact_at_stress(cfg: dict, stress: float, grain_size: float) -> dict:
     """The config with the contact law set for the test's load: unless `[contact] reference_force`
-    is given, REFERENCE_STRESS sigma_3 d^2 (docs/contact.md: the weight's force, the default
-    elsewhere, would leave the contacts at nanometre gaps where the barrier is stiffest, and the
-    friction springs needing more slip than the contact layer is thick before a pair slides)."""
+    is given, REFERENCE_STRESS `stress` d^2, `stress` the confining stress or a shear box's normal
+    stress (docs/contact.md: the weight's force, the default elsewhere, would leave the contacts at
+    nanometre gaps where the barrier is stiffest, and the friction springs needing more slip than
+    the contact layer is thick before a pair slides)."""
     if cfg["contact"]["reference_force"] is not None:
         return cfg
-    force = REFERENCE_STRESS * cfg["consolidation"]["stress"] * grain_size**2
+    force = REFERENCE_STRESS * stress * grain_size**2
     return {**cfg, "contact": {**cfg["contact"], "reference_force": force}}
 
 
@@ -267,10 +271,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     cell = TriaxialCell(cfg, initial)
-    scene = scene_from(initial.grains, contact_at_stress(cfg, cell.grain_size), cell.walls)
+    sigma_c = cfg["consolidation"]["stress"]
+    scene = scene_from(initial.grains, contact_at_stress(cfg, sigma_c, cell.grain_size), cell.walls)
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density
-    sigma_c = cfg["consolidation"]["stress"]
     servos = servos_for(cell, scene.contact, cfg, density)
     shear_rate = cfg["shear"]["inertia_number"] * np.sqrt(sigma_c / density) / cell.grain_size
     path = TriaxialPath(cell, servos, sigma_c, cfg["consolidation"]["max_time"], cfg["shear"], shear_rate,
@@ -297,16 +301,17 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
                           identity=identity, x0=initial.x, v0=initial.v, friction0=initial.friction,
                           resume=resume_here, progress=progress, stop=path.stop, control=path,
-                          on_frame=on_frame, frame_csvs=("triaxial.csv",), volume=lambda t, x: cell.volume(t))  # fmt: skip
+                          on_frame=on_frame, frame_csvs=("triaxial.csv",),
+                          volume=lambda t, x: cell.volume(t))  # fmt: skip
     finally:
         if log:
             log["csv"].close()
     records = path.stage_records()
     for r in records:
         if r["end_reason"] not in ("reached", "max_strain"):
-            warnings.warn(StageNotReached(f"{r['name']} ended at {r['end_reason'] or 'the run end'}, not at its target"),
-                          stacklevel=2)  # fmt: skip
-    rows = np.atleast_2d(np.loadtxt(csv_path, delimiter=",", skiprows=1))
+            ended = r["end_reason"] or "the run end"
+            warnings.warn(StageNotReached(f"{r['name']} ended at {ended}, not at its target"), stacklevel=2)
+    rows = np.atleast_2d(np.genfromtxt(csv_path, delimiter=",", skip_header=1))  # an empty cell: NaN
     figures = triaxial_figures(rows)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None

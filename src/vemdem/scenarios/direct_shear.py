@@ -1,0 +1,272 @@
+"""`scenario = "direct_shear"`: a split shear box (docs/direct-shear.md).
+
+The settled pack stays where it settled; its box becomes a shear box split at `sample.split` of
+the pack's height: the lower half (the floor and its two x sides, finite rectangles up to the
+split) can move along x, the upper half's two x sides (from the split up, past the lid) stay,
+the two y sides are frictionless planes along the shear, and a lid starts `sample.gap` mean
+grain sizes above the pack. The floor and the lid are rough (the grains' friction): a shear box's
+plates carry the shear into the sample. Two stages:
+
+1. consolidation: the lid's servo (model/servo.py) brings it to the normal stress; the stage
+   ends when it holds it within `servo.stress_tolerance` with the sample at rest, or at
+   `normal.max_time`;
+2. shear: the lower half moves along +x at a constant speed (the shear rate speed / H that gives
+   `shear.inertia_number` at the normal stress, H the sample's height) while the lid's servo holds
+   the normal stress; the stage ends at `shear.max_displacement` of the box's length, or at its
+   `max_time`. The halves' walls are one-sided rectangles that move apart by the travel: it stays
+   below the smallest grain (a config rule), so that no grain fits between them.
+
+sigma_n = the lid's force over the box's section, tau = the force the lower half (its floor and
+sides) carries along x over the same section; the vertical displacement is the lid's rise.
+
+Outputs in DIR: shear.csv (one row per frame: analysis.direct_shear.HEADER), shear.png,
+summary.json (phi_peak_deg, phi_residual_deg, dilation_angle_deg, max_inertia_number, stages),
+fabric.csv and the scene outputs; `--resume` continues a run from inside either stage.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.direct_shear import HEADER, plot_shear, shear_figures
+from ..analysis.microstructure import coordination
+from ..config import ConfigError, tables
+from ..config.build import scene_from, solver_options_from
+from ..contact.walls import MeshWall, PlaneWall, ServoMotion
+from ..driver.loop import simulate
+from ..driver.stages import StageNotReached, StageRecord, from_jsonable, jsonable, unbalanced_force
+from ..driver.summary import run_summary
+from ..geometry.mass import body_volumes
+from ..io.results import CsvLog, write_json
+from ..model.bodies import equivalent_diameters
+from ..model.servo import Servo
+from ..solver.api import make_integrator
+from .identity import run_identity
+from .pack import initial_state_from
+from .triaxial import contact_at_stress
+
+RESUMABLE = True
+SCHEMA = tables.DIRECT_SHEAR
+STAGES = ("consolidation", "shear")
+LOWER = ("floor", "lower -x", "lower +x")  # the walls that move with the lower half
+
+
+def _rectangle(x: float, y0: float, y1: float, z0: float, z1: float, inward: float) -> tuple[np.ndarray, np.ndarray]:
+    """A rectangle in the plane x = const from (y0, z0) to (y1, z1), its two triangles wound so
+    that their normals point along `inward` (+1 or -1 along x)."""
+    v = np.array([[x, y0, z0], [x, y1, z0], [x, y1, z1], [x, y0, z1]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]]) if inward > 0 else np.array([[0, 2, 1], [0, 3, 2]])
+    return v, faces
+
+
+class ShearBox:
+    """The walls of a split box around a settled pack, and its measures."""
+
+    def __init__(self, cfg: dict, initial):
+        meta = initial.meta
+        self.box, self.floor = tuple(float(v) for v in meta["box"]), float(meta["floor"])
+        cx, cy = (float(v) for v in meta["centre"])
+        volumes = np.array([g.volume for g in initial.grains])
+        sizes = equivalent_diameters(volumes)
+        self.grain_size, smallest = float(np.mean(sizes)), float(np.min(sizes))
+        self.travel_max = cfg["shear"]["max_displacement"] * self.box[0]
+        if self.travel_max >= smallest:
+            raise ConfigError(f"shear.max_displacement: the lower half would travel {self.travel_max * 1e3:.3g} mm, "
+                              f"past the smallest grain ({smallest * 1e3:.3g} mm), which could then slip between "
+                              "the halves' walls; take less than "
+                              f"{smallest / self.box[0]:.3g}")  # fmt: skip
+        top = float(initial.x[:, 2].max())
+        self.height0 = top - self.floor + cfg["sample"]["gap"] * self.grain_size
+        split = self.floor + cfg["sample"]["split"] * (top - self.floor)
+        above = self.floor + self.height0 + 2.0 * self.grain_size  # the upper sides reach past the lid
+        below = self.floor - self.grain_size
+        hx, hy = 0.5 * self.box[0], 0.5 * self.box[1]
+        self.drive = ServoMotion((1.0, 0.0, 0.0))  # the lower half's motion, shared by its walls
+        lower, upper = [], []
+        for name, x, inward in (("-x", cx - hx, 1.0), ("+x", cx + hx, -1.0)):
+            v, f = _rectangle(x, cy - hy, cy + hy, below, split, inward)
+            lower.append(MeshWall(v, f, self.drive, f"lower {name}"))
+            v, f = _rectangle(x, cy - hy, cy + hy, split, above, inward)
+            upper.append(MeshWall(v, f, name=f"upper {name}"))
+        floor = PlaneWall(np.array([cx, cy, self.floor]), np.array([0.0, 0.0, 1.0]), self.drive, "floor")
+        sides = [PlaneWall(np.array([cx, cy - hy, self.floor]), np.array([0.0, 1.0, 0.0]), name="wall -y",
+                           frictionless=True),
+                 PlaneWall(np.array([cx, cy + hy, self.floor]), np.array([0.0, -1.0, 0.0]), name="wall +y",
+                           frictionless=True)]  # fmt: skip
+        self.lid = PlaneWall(np.array([cx, cy, self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
+                             ServoMotion((0.0, 0.0, -1.0)), "lid")  # fmt: skip
+        self.walls = [floor, *sides, self.lid]
+        self.meshes = lower + upper
+        self.area = self.box[0] * self.box[1]
+
+    def height(self, t: float) -> float:
+        return self.height0 - self.lid.motion.travel(t)
+
+    def volume(self, t: float) -> float:
+        return self.area * self.height(t)
+
+    def stresses(self, reactions: np.ndarray, lid: int, lower: list[int]) -> tuple[float, float]:
+        """(sigma_n, tau): the lid's normal stress and the shear stress the lower half carries (Pa)."""
+        sigma_n = float(reactions[lid, 2]) / self.area  # the grains push the lid up
+        tau = -float(np.sum(reactions[lower, 0])) / self.area  # the half pushes the grains along +x
+        return sigma_n, tau
+
+
+class DirectShearPath:
+    """The time loop's control: the lid's servo throughout; the lower half held, then driven at a
+    constant speed once the consolidation has ended."""
+
+    def __init__(self, cell: ShearBox, servo: Servo, sigma_n: float, cfg: dict, speed: float, lumped, vertex_ptr):
+        self.cell, self.servo, self.sigma_n, self.speed = cell, servo, float(sigma_n), float(speed)
+        self.max_time = (float(cfg["normal"]["max_time"]), float(cfg["shear"]["max_time"]))
+        self.stress_tolerance = cfg["servo"]["stress_tolerance"]
+        self.unbalanced_tolerance = cfg["servo"]["unbalanced_tolerance"]
+        self.lumped, self.vertex_ptr = lumped, vertex_ptr
+        self.current = 0
+        self.records: list[StageRecord] = []
+        self.start = None  # (t, lower half's travel, lid travel) where the current stage began
+
+    @property
+    def done(self) -> bool:
+        return self.current >= len(STAGES)
+
+    def stop(self, state) -> bool:
+        return self.done
+
+    def displacements(self, t: float) -> tuple[float, float]:
+        """(shear, vertical) displacement from where the current stage began: the lower half's
+        travel and the lid's rise."""
+        _, x0, z0 = self.start if self.start is not None else (0.0, 0.0, 0.0)
+        return self.cell.drive.travel(t) - x0, -(self.cell.lid.motion.travel(t) - z0)
+
+    def __call__(self, state, info) -> None:
+        t = state.t
+        self.servo.measure(info.wall_reactions, info.ints, info.floats, t)
+        if not self.done:
+            if not self.records or self.records[-1].stage != self.current:
+                self.start = (t, self.cell.drive.travel(t), self.cell.lid.motion.travel(t))
+                self.records.append(StageRecord(self.current, self.sigma_n, t, self.servo.stress, 0.0))
+            rec = self.records[-1]
+            rec.steps += 1
+            rec.newton_iterations += int(info.iterations)
+            reason = self._ended(rec, state, info)
+            if reason:
+                rec.end_time, rec.end_stress, rec.end_reason = t, self.servo.stress, reason
+                rec.end_strain = self.displacements(t)[0] / self.cell.box[0]
+                self.current += 1
+            rec.largest_speed = max(rec.largest_speed, abs(self.servo.motion.speed))
+        self.servo.steer(t)
+        self.cell.drive.steer(t, self.speed if self.current == 1 else 0.0)
+
+    def _ended(self, rec: StageRecord, state, info) -> str:
+        if self.current == 0:
+            if abs(self.servo.stress - self.sigma_n) <= self.stress_tolerance * self.sigma_n:
+                rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
+                if rec.unbalanced <= self.unbalanced_tolerance:
+                    return "reached"
+        elif self.displacements(state.t)[0] >= self.cell.travel_max:
+            return "max_displacement"
+        if state.t - rec.start_time >= self.max_time[self.current]:
+            return "max_time"
+        return ""
+
+    # ---------------------------------------------------------------- checkpoints
+    def carried(self) -> dict:
+        return {"servo": self.servo.carried(), "drive": self.cell.drive.carried(), "current": self.current,
+                "records": [jsonable(asdict(r)) for r in self.records],
+                "start": None if self.start is None else list(self.start)}  # fmt: skip
+
+    def carry_on(self, carried: dict) -> None:
+        self.servo.carry_on(carried["servo"])
+        self.cell.drive.carry_on(carried["drive"])
+        self.current = int(carried["current"])
+        self.records = [StageRecord(**from_jsonable(r)) for r in carried["records"]]
+        self.start = None if carried["start"] is None else tuple(float(v) for v in carried["start"])
+
+    def stage_records(self) -> list[dict]:
+        out = []
+        for r in self.records:
+            d = asdict(r)
+            d.pop("at_end")
+            d["end_displacement_share"] = d.pop("end_strain")
+            out.append(jsonable({**d, "name": STAGES[r.stage]}))
+        return out
+
+
+def frame_row(cell: ShearBox, path: DirectShearPath, scene, state, contact, walls: tuple, density: float) -> list:
+    t = state.t
+    sigma_n, tau = cell.stresses(contact.wall_reactions, *walls)
+    x, y = path.displacements(t)
+    solids = float(np.sum(body_volumes(state.x, *scene.surface_triangles(), scene.n_grains)))
+    records = contact.records(scene.contact.all_positions(state.x, t))
+    z_m = coordination(records.a, records.b, scene.n_grains)["mechanical_coordination"]
+    rate = abs(cell.drive.speed) / cell.height(t)
+    inertia = rate * cell.grain_size / np.sqrt(sigma_n / density) if sigma_n > 0 else np.inf
+    ratio = tau / sigma_n if sigma_n > 0 else np.nan
+    stage = min(path.current, len(STAGES) - 1)
+    return [t, stage, x, y, sigma_n, tau, ratio, cell.volume(t) / solids - 1.0, z_m, inertia]
+
+
+def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
+    cell = ShearBox(cfg, initial)
+    sigma_n = cfg["normal"]["stress"]
+    scene = scene_from(initial.grains, contact_at_stress(cfg, sigma_n, cell.grain_size), cell.walls, cell.meshes)
+    integrator = make_integrator(solver_options_from(cfg), scene)
+    density = scene.material.density
+    rate = cfg["shear"]["inertia_number"] * np.sqrt(sigma_n / density) / cell.grain_size
+    cap = cfg["servo"]["inertia_number"] * np.sqrt(sigma_n / density) / cell.grain_size * cell.height0
+    servo = Servo(scene.contact, cell.lid, cell.area, gain=cfg["servo"]["gain"], max_speed=cap, target=sigma_n)
+    speed = rate * cell.height0
+    path = DirectShearPath(cell, servo, sigma_n, cfg, speed, scene.bodies.lumped, scene.bodies.vertex_ptr)
+
+    names = scene.contact.wall_names
+    walls = (names.index("lid"), [names.index(n) for n in LOWER])
+    identity = run_identity(cfg, SCHEMA)
+    resume_here = resume and (out_dir / "checkpoint.npz").is_file()
+    csv_path = out_dir / "shear.csv"
+    log = {}
+
+    def on_frame(frame, state, contact):
+        if not log:  # opened at the first frame: a resumed run's loop has cut the file back to its checkpoint by then
+            log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
+        log["csv"].write(*frame_row(cell, path, scene, state, contact, walls, density))
+
+    every = cfg["output"]["every"]
+    shear_time = min(cfg["shear"]["max_time"], cell.travel_max / speed)
+    duration = cfg["normal"]["max_time"] + shear_time + 2 * every
+    try:
+        result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
+                          identity=identity, x0=initial.x, v0=initial.v, friction0=initial.friction,
+                          resume=resume_here, progress=progress, stop=path.stop, control=path,
+                          on_frame=on_frame, frame_csvs=("shear.csv",), volume=lambda t, x: cell.volume(t))  # fmt: skip
+    finally:
+        if log:
+            log["csv"].close()
+    records = path.stage_records()
+    for r in records:
+        if r["end_reason"] not in ("reached", "max_displacement"):
+            ended = r["end_reason"] or "the run end"
+            warnings.warn(StageNotReached(f"{r['name']} ended at {ended}, not at its target"), stacklevel=2)
+    rows = np.atleast_2d(np.genfromtxt(csv_path, delimiter=",", skip_header=1))  # an empty cell: NaN
+    figures = shear_figures(rows)
+    title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_n = {sigma_n / 1e3:g} kPa, {integrator.name}"
+    plot_shear(rows, out_dir / "shear.png", title, figures)
+    summary = run_summary("direct_shear", scene, result, t_start)
+    summary.update(figures)
+    summary["normal_stress_Pa"] = sigma_n
+    summary["shear_speed"] = speed
+    summary["stages"] = records
+    summary["sample_start_height"] = cell.height0
+    summary["grain_size"] = cell.grain_size
+    summary["initial_state"] = str(state_path)
+    summary["config_fingerprint"] = identity.fingerprint
+    write_json(out_dir / "summary.json", summary)
+    return summary

@@ -1,0 +1,110 @@
+"""The direct shear test (docs/direct-shear.md): its measures on closed-form curves, and a 20-grain
+rigid sample in a split box: the lid's servo brings it to the normal stress at rest and holds it
+while the lower half moves at its constant speed, and the forces on the box balance (the lower
+half's push along x is carried by the upper half and the lid: momentum, read from other walls)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from vemdem.analysis.direct_shear import HEADER, dilation_angle, peak, residual, shear_figures
+from vemdem.config import ConfigError
+from vemdem.scenarios.registry import checked_config
+
+SIGMA_N = 20e3
+CONFIG = {
+    "scenario": "direct_shear",
+    "pack": {"n_grains": 20, "seed": 3, "mu_s": 0.0, "mu_d": 0.0, "grains": {"size": 1.0e-3, "vertices": 8},
+             "box": {"width": 3.6e-3, "depth": 2.6e-3}},
+    "normal": {"stress": SIGMA_N, "max_time": 0.05},
+    "shear": {"max_displacement": 0.1, "inertia_number": 2e-3},
+    "servo": {"inertia_number": 2e-3},
+    "model": {"grains": "rigid"},
+    "solver": {"integrator": "explicit"},
+    "contact": {"mu_s": 0.3, "mu_d": 0.3},
+    "output": {"every": 1e-3, "vtk": False},
+}  # fmt: skip
+
+
+# ------------------------------------------------------------------ measures in closed form
+def test_peak_residual_and_dilation_of_a_known_curve():
+    # tau / sigma_n rises to 0.8 at 1 mm, decays to 0.5; the lid rises at slope 0.2 until 1 mm, then stays
+    x = np.linspace(0.0, 5e-3, 501)
+    ratio = np.where(x < 1e-3, 0.8 * x / 1e-3, 0.5 + 0.3 * np.exp(-(x - 1e-3) / 0.3e-3))
+    y = np.where(x < 1e-3, 0.2 * x, 0.2e-3)
+    p = peak(x, ratio)
+    assert p["phi_peak_deg"] == pytest.approx(np.degrees(np.arctan(0.8)))
+    assert p["shear_displacement_at_peak"] == pytest.approx(1e-3)
+    r = residual(x, ratio)  # the last 20 %: 4-5 mm, where the decay is 3e-5 of its start
+    assert r["phi_residual_deg"] == pytest.approx(np.degrees(np.arctan(0.5)), abs=1e-3)
+    assert r["phi_residual_spread_deg"] < 1e-3
+    assert dilation_angle(x, y)["dilation_angle_deg"] == pytest.approx(np.degrees(np.arctan(0.2)))
+    # a contracting sample: a negative angle
+    assert dilation_angle(x, -0.1 * x)["dilation_angle_deg"] == pytest.approx(-np.degrees(np.arctan(0.1)))
+
+
+def test_measures_refuse_runs_too_short_and_figures_say_why():
+    with pytest.raises(ValueError, match="residual state needs 3"):
+        residual(np.array([0.0, 1e-3]), np.array([0.3, 0.4]))
+    with pytest.raises(ValueError, match="needs 4"):
+        dilation_angle(np.zeros(3), np.zeros(3))
+    rows = np.zeros((3, len(HEADER)))
+    rows[:, HEADER.index("stage")] = [0, 1, 1]
+    out = shear_figures(rows)
+    assert out["shear_rows"] == 2 and "residual_error" in out and "dilation_error" in out
+
+
+# ------------------------------------------------------------------ the scenario
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("direct_shear")
+    cfg, module = checked_config(CONFIG)
+    summary = module.run(cfg, out)
+    rows = np.genfromtxt(out / "shear.csv", delimiter=",", names=True)
+    return out, summary, rows
+
+
+def test_the_lid_holds_the_normal_stress_while_the_lower_half_moves_at_its_speed(run):
+    _, summary, rows = run
+    consolidation, shear = summary["stages"]
+    assert consolidation["end_reason"] == "reached" and consolidation["unbalanced"] <= 0.01
+    assert consolidation["end_stress"] == pytest.approx(SIGMA_N, rel=0.01)
+    assert shear["end_reason"] == "max_displacement"
+    moving = rows[(rows["stage"] == 1) & (rows["shear_displacement"] < 0.1 * 3.6e-3)]
+    speed = np.polyfit(moving["time"], moving["shear_displacement"], 1)[0]
+    assert speed == pytest.approx(summary["shear_speed"], rel=1e-6)
+    assert np.mean(moving["sigma_n"]) == pytest.approx(SIGMA_N, rel=0.02)
+    assert summary["phi_peak_deg"] > 10.0 and np.all(np.isfinite(moving["tau_over_sigma_n"]))
+
+
+def test_the_box_is_in_balance_along_the_shear(run):
+    out, summary, rows = run
+    walls = np.genfromtxt(out / "walls.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    shear_times = rows["time"][rows["stage"] == 1][2:]
+    pushes, carried = [], []
+    for t in shear_times:
+        at = walls[np.isclose(walls["time"], t)]
+        lower = sum(float(w["fx"]) for w in at if w["name"] in ("floor", "lower -x", "lower +x"))
+        upper = sum(float(w["fx"]) for w in at if w["name"] in ("upper -x", "upper +x", "lid", "wall -y", "wall +y"))
+        pushes.append(-lower)
+        carried.append(upper)
+    # the grains' momentum hardly changes in a quasi-static shear: what the lower half pushes,
+    # the upper half and the lid hold back, within a few % of the push
+    pushes, carried = np.array(pushes), np.array(carried)
+    assert np.median(np.abs(pushes - carried) / np.abs(pushes)) < 0.05
+    assert np.mean(pushes) > 0
+
+
+def test_summary_and_figure(run):
+    out, _, _ = run
+    on_disk = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    for key in ("phi_peak_deg", "phi_residual_deg", "dilation_angle_deg", "max_inertia_number"):
+        assert isinstance(on_disk[key], float), key
+    assert (out / "shear.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_travel_past_the_smallest_grain_is_refused(tmp_path):
+    cfg, module = checked_config({**CONFIG, "shear": {"max_displacement": 0.4}})
+    with pytest.raises(ConfigError, match="shear.max_displacement: .* past the smallest grain"):
+        module.run(cfg, tmp_path)
