@@ -41,7 +41,7 @@ CONFIGS = {
                      "inertia_number": 2e-3}, "servo": {"inertia_number": 2e-3}, "output": {"every": 1e-3, "vtk": False}},
 }  # fmt: skip
 LOADED = {"oedometer": ("oedometer.csv", "lid_force"), "triaxial": ("triaxial.csv", "sigma_1"),
-          "direct_shear": ("shear.csv", "tau")}
+          "direct_shear": ("shear.csv", "sigma_n")}
 STAGE_FILES = ["history.csv", "grains.csv", "walls.csv", "fabric.csv"]
 
 

@@ -43,7 +43,7 @@ def test_consolidation_reaches_the_confining_stress_at_rest(run):
     assert consolidation["name"] == "consolidation" and consolidation["end_reason"] == "reached"
     # the top platen's stress where the stage ended, and the sample at rest
     assert consolidation["end_stress"] == pytest.approx(SIGMA_C, rel=0.01)
-    assert consolidation["unbalanced"] <= 0.01
+    assert consolidation["unbalanced"] <= 0.1  # the shear tests' servo.unbalanced_tolerance
     # the lateral walls at the first shear frame, a step after the stage ended
     first = rows[rows["stage"] == 1][0]
     assert first["sigma_3"] == pytest.approx(SIGMA_C, rel=0.02)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
-          "void_ratio", "coordination", "inertia_number")  # fmt: skip
+          "void_ratio", "coordination", "inertia_number", "unbalanced")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
 RESIDUAL_WINDOW = 0.2  # the share of the shear displacement the residual ratio is the mean over
 

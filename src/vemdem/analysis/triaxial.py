@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 HEADER = ("time", "stage", "axial_strain", "volumetric_strain", "sigma_1", "sigma_3", "q", "p", "void_ratio",
-          "coordination", "fabric_anisotropy", "inertia_number", "sigma_1_contacts", "sigma_3_contacts")  # fmt: skip
+          "coordination", "fabric_anisotropy", "inertia_number", "sigma_1_contacts", "sigma_3_contacts", "unbalanced")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
 
 # Rows whose axial strain lies on a window's edge count as inside it: the strains are sums of

@@ -27,8 +27,6 @@ fabric.csv and the scene outputs; `--resume` continues a run from inside either 
 from __future__ import annotations
 
 import time
-import warnings
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -38,21 +36,17 @@ from ..analysis.microstructure import coordination
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import MeshWall, PlaneWall, ServoMotion
-from ..driver.loop import simulate
-from ..driver.stages import StageNotReached, StageRecord, from_jsonable, jsonable, unbalanced_force
-from ..driver.summary import run_summary
+from ..driver.stages import unbalanced_force
 from ..geometry.mass import body_volumes
-from ..io.results import CsvLog, write_json
 from ..model.bodies import equivalent_diameters
 from ..model.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
+from .lab import STAGES, TwoStagePath, contact_at_stress, run_stages, write_summary
 from .pack import initial_state_from
-from .triaxial import contact_at_stress
 
 RESUMABLE = True
 SCHEMA = tables.DIRECT_SHEAR
-STAGES = ("consolidation", "shear")
 LOWER = ("floor", "lower -x", "lower +x")  # the walls that move with the lower half
 
 
@@ -117,26 +111,17 @@ class ShearBox:
         return sigma_n, tau
 
 
-class DirectShearPath:
-    """The time loop's control: the lid's servo throughout; the lower half held, then driven at a
-    constant speed once the consolidation has ended."""
+class DirectShearPath(TwoStagePath):
+    """The lid's servo throughout; the lower half held, then driven at a constant speed once the
+    consolidation has ended (scenarios.lab.TwoStagePath)."""
 
-    def __init__(self, cell: ShearBox, servo: Servo, sigma_n: float, cfg: dict, speed: float, lumped, vertex_ptr):
-        self.cell, self.servo, self.sigma_n, self.speed = cell, servo, float(sigma_n), float(speed)
-        self.max_time = (float(cfg["normal"]["max_time"]), float(cfg["shear"]["max_time"]))
-        self.stress_tolerance = cfg["servo"]["stress_tolerance"]
-        self.unbalanced_tolerance = cfg["servo"]["unbalanced_tolerance"]
-        self.lumped, self.vertex_ptr = lumped, vertex_ptr
-        self.current = 0
-        self.records: list[StageRecord] = []
-        self.start = None  # (t, lower half's travel, lid travel) where the current stage began
+    def __init__(self, cell: ShearBox, servo: Servo, cfg: dict, speed: float, lumped, vertex_ptr):
+        super().__init__([servo], cfg["normal"]["stress"], (cfg["normal"]["max_time"], cfg["shear"]["max_time"]),
+                         cfg["servo"], lumped, vertex_ptr, motions=(cell.drive,))  # fmt: skip
+        self.cell, self.speed = cell, float(speed)
 
-    @property
-    def done(self) -> bool:
-        return self.current >= len(STAGES)
-
-    def stop(self, state) -> bool:
-        return self.done
+    def begin(self, t: float) -> tuple:
+        return t, self.cell.drive.travel(t), self.cell.lid.motion.travel(t)
 
     def displacements(self, t: float) -> tuple[float, float]:
         """(shear, vertical) displacement from where the current stage began: the lower half's
@@ -144,58 +129,18 @@ class DirectShearPath:
         _, x0, z0 = self.start if self.start is not None else (0.0, 0.0, 0.0)
         return self.cell.drive.travel(t) - x0, -(self.cell.lid.motion.travel(t) - z0)
 
-    def __call__(self, state, info) -> None:
-        t = state.t
-        self.servo.measure(info.wall_reactions, info.ints, info.floats, t)
-        if not self.done:
-            if not self.records or self.records[-1].stage != self.current:
-                self.start = (t, self.cell.drive.travel(t), self.cell.lid.motion.travel(t))
-                self.records.append(StageRecord(self.current, self.sigma_n, t, self.servo.stress, 0.0))
-            rec = self.records[-1]
-            rec.steps += 1
-            rec.newton_iterations += int(info.iterations)
-            reason = self._ended(rec, state, info)
-            if reason:
-                rec.end_time, rec.end_stress, rec.end_reason = t, self.servo.stress, reason
-                rec.end_strain = self.displacements(t)[0] / self.cell.box[0]
-                self.current += 1
-            rec.largest_speed = max(rec.largest_speed, abs(self.servo.motion.speed))
-        self.servo.steer(t)
+    def progress(self, t: float) -> float:
+        return self.displacements(t)[0] / self.cell.box[0]
+
+    def consolidated(self) -> bool:
+        return self.held(self.servos[0])
+
+    def sheared(self, t: float) -> str:
+        return "max_displacement" if self.displacements(t)[0] >= self.cell.travel_max else ""
+
+    def steer(self, t: float) -> None:
+        self.servos[0].steer(t)
         self.cell.drive.steer(t, self.speed if self.current == 1 else 0.0)
-
-    def _ended(self, rec: StageRecord, state, info) -> str:
-        if self.current == 0:
-            if abs(self.servo.stress - self.sigma_n) <= self.stress_tolerance * self.sigma_n:
-                rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
-                if rec.unbalanced <= self.unbalanced_tolerance:
-                    return "reached"
-        elif self.displacements(state.t)[0] >= self.cell.travel_max:
-            return "max_displacement"
-        if state.t - rec.start_time >= self.max_time[self.current]:
-            return "max_time"
-        return ""
-
-    # ---------------------------------------------------------------- checkpoints
-    def carried(self) -> dict:
-        return {"servo": self.servo.carried(), "drive": self.cell.drive.carried(), "current": self.current,
-                "records": [jsonable(asdict(r)) for r in self.records],
-                "start": None if self.start is None else list(self.start)}  # fmt: skip
-
-    def carry_on(self, carried: dict) -> None:
-        self.servo.carry_on(carried["servo"])
-        self.cell.drive.carry_on(carried["drive"])
-        self.current = int(carried["current"])
-        self.records = [StageRecord(**from_jsonable(r)) for r in carried["records"]]
-        self.start = None if carried["start"] is None else tuple(float(v) for v in carried["start"])
-
-    def stage_records(self) -> list[dict]:
-        out = []
-        for r in self.records:
-            d = asdict(r)
-            d.pop("at_end")
-            d["end_displacement_share"] = d.pop("end_strain")
-            out.append(jsonable({**d, "name": STAGES[r.stage]}))
-        return out
 
 
 def frame_row(cell: ShearBox, path: DirectShearPath, scene, state, contact, walls: tuple, density: float) -> list:
@@ -209,7 +154,8 @@ def frame_row(cell: ShearBox, path: DirectShearPath, scene, state, contact, wall
     inertia = rate * cell.grain_size / np.sqrt(sigma_n / density) if sigma_n > 0 else np.inf
     ratio = tau / sigma_n if sigma_n > 0 else np.nan
     stage = min(path.current, len(STAGES) - 1)
-    return [t, stage, x, y, sigma_n, tau, ratio, cell.volume(t) / solids - 1.0, z_m, inertia]
+    unbalanced = unbalanced_force(state, scene.bodies.lumped, scene.bodies.vertex_ptr, contact)
+    return [t, stage, x, y, sigma_n, tau, ratio, cell.volume(t) / solids - 1.0, z_m, inertia, unbalanced]
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
@@ -225,48 +171,18 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     cap = cfg["servo"]["inertia_number"] * np.sqrt(sigma_n / density) / cell.grain_size * cell.height0
     servo = Servo(scene.contact, cell.lid, cell.area, gain=cfg["servo"]["gain"], max_speed=cap, target=sigma_n)
     speed = rate * cell.height0
-    path = DirectShearPath(cell, servo, sigma_n, cfg, speed, scene.bodies.lumped, scene.bodies.vertex_ptr)
-
+    path = DirectShearPath(cell, servo, cfg, speed, scene.bodies.lumped, scene.bodies.vertex_ptr)
     names = scene.contact.wall_names
     walls = (names.index("lid"), [names.index(n) for n in LOWER])
     identity = run_identity(cfg, SCHEMA)
-    resume_here = resume and (out_dir / "checkpoint.npz").is_file()
-    csv_path = out_dir / "shear.csv"
-    log = {}
-
-    def on_frame(frame, state, contact):
-        if not log:  # opened at the first frame: a resumed run's loop has cut the file back to its checkpoint by then
-            log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
-        log["csv"].write(*frame_row(cell, path, scene, state, contact, walls, density))
-
-    every = cfg["output"]["every"]
     shear_time = min(cfg["shear"]["max_time"], cell.travel_max / speed)
-    duration = cfg["normal"]["max_time"] + shear_time + 2 * every
-    try:
-        result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
-                          identity=identity, x0=initial.x, v0=initial.v, friction0=initial.friction,
-                          resume=resume_here, progress=progress, stop=path.stop, control=path,
-                          on_frame=on_frame, frame_csvs=("shear.csv",), volume=lambda t, x: cell.volume(t))  # fmt: skip
-    finally:
-        if log:
-            log["csv"].close()
-    records = path.stage_records()
-    for r in records:
-        if r["end_reason"] not in ("reached", "max_displacement"):
-            ended = r["end_reason"] or "the run end"
-            warnings.warn(StageNotReached(f"{r['name']} ended at {ended}, not at its target"), stacklevel=2)
-    rows = np.atleast_2d(np.genfromtxt(csv_path, delimiter=",", skip_header=1))  # an empty cell: NaN
+    duration = cfg["normal"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
+    result, rows = run_stages(scene, integrator, out_dir, cfg, identity, initial, path, "shear.csv", HEADER,
+                              lambda state, contact: frame_row(cell, path, scene, state, contact, walls, density),
+                              lambda t, x: cell.volume(t), duration, progress, resume)  # fmt: skip
     figures = shear_figures(rows)
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_n = {sigma_n / 1e3:g} kPa, {integrator.name}"
     plot_shear(rows, out_dir / "shear.png", title, figures)
-    summary = run_summary("direct_shear", scene, result, t_start)
-    summary.update(figures)
-    summary["normal_stress_Pa"] = sigma_n
-    summary["shear_speed"] = speed
-    summary["stages"] = records
-    summary["sample_start_height"] = cell.height0
-    summary["grain_size"] = cell.grain_size
-    summary["initial_state"] = str(state_path)
-    summary["config_fingerprint"] = identity.fingerprint
-    write_json(out_dir / "summary.json", summary)
-    return summary
+    return write_summary("direct_shear", scene, result, t_start, out_dir, figures,
+                         path.stage_records("end_displacement_share"), cell, state_path, identity,
+                         normal_stress_Pa=sigma_n, shear_speed=speed)  # fmt: skip

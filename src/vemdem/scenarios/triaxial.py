@@ -32,8 +32,6 @@ scene outputs; `--resume` continues a run from inside either stage.
 from __future__ import annotations
 
 import time
-import warnings
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -43,21 +41,18 @@ from ..analysis.triaxial import FAILURE_STATES, HEADER, envelopes, plot_envelope
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import PlaneWall, ServoMotion
-from ..driver.loop import simulate
-from ..driver.stages import StageNotReached, StageRecord, from_jsonable, jsonable, unbalanced_force
-from ..driver.summary import run_summary
+from ..driver.stages import unbalanced_force
 from ..geometry.mass import body_volumes
-from ..io.results import CsvLog, write_json
 from ..model.bodies import equivalent_diameters
 from ..model.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
+from .lab import STAGES, TwoStagePath, contact_at_stress, run_stages, write_summary
 from .pack import initial_state_from
 
 RESUMABLE = True
 SCHEMA = tables.TRIAXIAL
 LATERAL = ("wall -x", "wall +x", "wall -y", "wall +y")
-STAGES = ("consolidation", "shear")
 
 
 class TriaxialCell:
@@ -105,120 +100,46 @@ class TriaxialCell:
         return float(stress[4]), float(np.mean(stress[:4]))
 
 
-class TriaxialPath:
-    """The time loop's control: consolidation by five servos, then shear by the platen at constant
-    speed with the four lateral servos; the stages' records as driver.stages.StageRecord."""
+class TriaxialPath(TwoStagePath):
+    """Consolidation by the five servos, then shear by the platen at a constant speed with the four
+    lateral servos (scenarios.lab.TwoStagePath)."""
 
-    def __init__(self, cell: TriaxialCell, servos: list[Servo], sigma_c: float, consolidation_time: float,
-                 shear: dict, shear_rate: float, lumped, vertex_ptr, servo_cfg: dict):  # fmt: skip
-        self.cell, self.servos, self.sigma_c = cell, servos, float(sigma_c)
-        self.max_time = (float(consolidation_time), float(shear["max_time"]))
-        self.max_strain, self.rate = float(shear["max_strain"]), float(shear_rate)
-        self.lumped, self.vertex_ptr = lumped, vertex_ptr
-        self.stress_tolerance = servo_cfg["stress_tolerance"]
-        self.unbalanced_tolerance = servo_cfg["unbalanced_tolerance"]
-        self.current = 0
-        self.records: list[StageRecord] = []
-        self.start = None  # (t, height, volume) where the current stage began
+    def __init__(self, cell: TriaxialCell, servos: list[Servo], cfg: dict, shear_rate: float, lumped, vertex_ptr):
+        super().__init__(servos, cfg["consolidation"]["stress"],
+                         (cfg["consolidation"]["max_time"], cfg["shear"]["max_time"]), cfg["servo"], lumped,
+                         vertex_ptr)  # fmt: skip
+        self.cell, self.max_strain, self.rate = cell, float(cfg["shear"]["max_strain"]), float(shear_rate)
         cell.now = 0.0  # the time the servos' areas are taken at
 
-    @property
-    def done(self) -> bool:
-        return self.current >= len(STAGES)
+    def __call__(self, state, info) -> None:
+        self.cell.now = state.t  # the servos' areas are the sample's at this step
+        super().__call__(state, info)
 
-    def stop(self, state) -> bool:
-        return self.done
+    def begin(self, t: float) -> tuple:
+        return t, self.cell.height(t), self.cell.volume(t)
 
     def strains(self, t: float) -> tuple[float, float]:
         """(axial, volumetric) strain from the sample where the current stage began."""
         _, h0, v0 = self.start if self.start is not None else (0.0, self.cell.height0, self.cell.volume(0.0))
         return 1.0 - self.cell.height(t) / h0, 1.0 - self.cell.volume(t) / v0
 
-    def __call__(self, state, info) -> None:
-        t = self.cell.now = state.t  # the servos' areas are the sample's at this step
-        for servo in self.servos:
-            servo.measure(info.wall_reactions, info.ints, info.floats, t)
-        if self.done:
-            self._steer(t)
-            return
-        if not self.records or self.records[-1].stage != self.current:
-            self.start = (t, self.cell.height(t), self.cell.volume(t))
-            self.records.append(StageRecord(self.current, self.sigma_c, t, self.servos[-1].stress, 0.0))
-        rec = self.records[-1]
-        rec.steps += 1
-        rec.newton_iterations += int(info.iterations)
-        reason = self._ended(rec, state, info)
-        if reason:
-            rec.end_time, rec.end_stress, rec.end_reason = t, self.servos[-1].stress, reason
-            rec.end_strain = self.strains(t)[0]
-            self.current += 1
-        self._steer(t)
-        rec.largest_speed = max(rec.largest_speed, max(abs(s.motion.speed) for s in self.servos))
+    def progress(self, t: float) -> float:
+        return self.strains(t)[0]
 
-    def _steer(self, t: float) -> None:
+    def consolidated(self) -> bool:
+        return all(self.held(s) for s in self.servos)
+
+    def sheared(self, t: float) -> str:
+        return "max_strain" if self.strains(t)[0] >= self.max_strain else ""
+
+    def steer(self, t: float) -> None:
         lateral, top = self.servos[:4], self.servos[4]
         for servo in lateral:
             servo.steer(t)
         if self.current == 0:
             top.steer(t)
         else:  # shear (and after it, the platen held): constant speed over the consolidated height
-            height = self.start[1] if self.current == 1 else self.cell.height(t)
-            top.motion.steer(t, self.rate * height if self.current == 1 else 0.0)
-
-    def _ended(self, rec: StageRecord, state, info) -> str:
-        elapsed = state.t - rec.start_time
-        if self.current == 0:
-            held = all(abs(s.stress - self.sigma_c) <= self.stress_tolerance * self.sigma_c for s in self.servos)
-            if held:
-                rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
-                if rec.unbalanced <= self.unbalanced_tolerance:
-                    return "reached"
-        elif self.strains(state.t)[0] >= self.max_strain:
-            return "max_strain"
-        if elapsed >= self.max_time[self.current]:
-            rec.unbalanced = unbalanced_force(state, self.lumped, self.vertex_ptr, info.contact)
-            return "max_time"
-        return ""
-
-    # ---------------------------------------------------------------- checkpoints
-    def carried(self) -> dict:
-        return {"servos": [s.carried() for s in self.servos], "current": self.current,
-                "records": [jsonable(asdict(r)) for r in self.records],
-                "start": None if self.start is None else list(self.start)}  # fmt: skip
-
-    def carry_on(self, carried: dict) -> None:
-        for servo, c in zip(self.servos, carried["servos"]):
-            servo.carry_on(c)
-        self.current = int(carried["current"])
-        self.records = [StageRecord(**from_jsonable(r)) for r in carried["records"]]
-        self.start = None if carried["start"] is None else tuple(float(v) for v in carried["start"])
-
-    def stage_records(self) -> list[dict]:
-        out = []
-        for r in self.records:
-            d = asdict(r)
-            d.pop("at_end")
-            out.append(jsonable({**d, "name": STAGES[r.stage]}))
-        return out
-
-
-# The contact law's reference force in units of sigma_3 d^2: the mean stress of a sand near its
-# peak (sigma_1 about 4 sigma_3) is about twice the confining stress, and a pair slides once its
-# force is carried with an elastic slip within the contact layer, up to 2 / (mu (1 - switch
-# factor)) reference forces (9.5 at mu 0.3): the strong chains at the peak stay inside that
-REFERENCE_STRESS = 2.0
-
-
-def contact_at_stress(cfg: dict, stress: float, grain_size: float) -> dict:
-    """The config with the contact law set for the test's load: unless `[contact] reference_force`
-    is given, REFERENCE_STRESS `stress` d^2, `stress` the confining stress or a shear box's normal
-    stress (docs/contact.md: the weight's force, the default elsewhere, would leave the contacts at
-    nanometre gaps where the barrier is stiffest, and the friction springs needing more slip than
-    the contact layer is thick before a pair slides)."""
-    if cfg["contact"]["reference_force"] is not None:
-        return cfg
-    force = REFERENCE_STRESS * stress * grain_size**2
-    return {**cfg, "contact": {**cfg["contact"], "reference_force": force}}
+            top.motion.steer(t, self.rate * self.start[1] if self.current == 1 else 0.0)
 
 
 def servos_for(cell: TriaxialCell, contact, cfg: dict, density: float) -> list[Servo]:
@@ -255,7 +176,8 @@ def frame_row(cell: TriaxialCell, path: TriaxialPath, scene, state, contact, wal
     lw = love_weber_stress(records.a, records.b, records.point, records.force, scene.grain_centroids(state.x),
                            cell.volume(t))  # fmt: skip
     return [t, stage, axial, volumetric, sigma_1, sigma_3, q, p, cell.volume(t) / solids - 1.0, z_m, a, inertia,
-            lw[2, 2], 0.5 * (lw[0, 0] + lw[1, 1])]  # fmt: skip
+            lw[2, 2], 0.5 * (lw[0, 0] + lw[1, 1]),
+            unbalanced_force(state, scene.bodies.lumped, scene.bodies.vertex_ptr, contact)]  # fmt: skip
 
 
 def preparation(cfg: dict, figures_e0: float) -> dict:
@@ -277,58 +199,28 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     density = scene.material.density
     servos = servos_for(cell, scene.contact, cfg, density)
     shear_rate = cfg["shear"]["inertia_number"] * np.sqrt(sigma_c / density) / cell.grain_size
-    path = TriaxialPath(cell, servos, sigma_c, cfg["consolidation"]["max_time"], cfg["shear"], shear_rate,
-                        scene.bodies.lumped, scene.bodies.vertex_ptr, cfg["servo"])  # fmt: skip
-
+    path = TriaxialPath(cell, servos, cfg, shear_rate, scene.bodies.lumped, scene.bodies.vertex_ptr)
     names = scene.contact.wall_names
     indices = [names.index(n) for n in (*LATERAL, "top")]
     normals = np.array([w.normal for w in (*cell.lateral, cell.top)])
     identity = run_identity(cfg, SCHEMA)
-    resume_here = resume and (out_dir / "checkpoint.npz").is_file()
-    csv_path = out_dir / "triaxial.csv"
-    log = {}
 
-    def on_frame(frame, state, contact):
-        if not log:  # opened at the first frame: a resumed run's loop has cut the file back to its checkpoint by then
-            log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
+    def row(state, contact):
         cell.now = state.t
-        log["csv"].write(*frame_row(cell, path, scene, state, contact, (indices, normals), density))
+        return frame_row(cell, path, scene, state, contact, (indices, normals), density)
 
-    every = cfg["output"]["every"]
     shear_time = min(cfg["shear"]["max_time"], cfg["shear"]["max_strain"] / shear_rate)
-    duration = cfg["consolidation"]["max_time"] + shear_time + 2 * every
-    try:
-        result = simulate(scene, integrator, out_dir, duration=duration, every=every, vtk=cfg["output"]["vtk"],
-                          identity=identity, x0=initial.x, v0=initial.v, friction0=initial.friction,
-                          resume=resume_here, progress=progress, stop=path.stop, control=path,
-                          on_frame=on_frame, frame_csvs=("triaxial.csv",),
-                          volume=lambda t, x: cell.volume(t))  # fmt: skip
-    finally:
-        if log:
-            log["csv"].close()
-    records = path.stage_records()
-    for r in records:
-        if r["end_reason"] not in ("reached", "max_strain"):
-            ended = r["end_reason"] or "the run end"
-            warnings.warn(StageNotReached(f"{r['name']} ended at {ended}, not at its target"), stacklevel=2)
-    rows = np.atleast_2d(np.genfromtxt(csv_path, delimiter=",", skip_header=1))  # an empty cell: NaN
+    duration = cfg["consolidation"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
+    result, rows = run_stages(scene, integrator, out_dir, cfg, identity, initial, path, "triaxial.csv", HEADER, row,
+                              lambda t, x: cell.volume(t), duration, progress, resume)  # fmt: skip
     figures = triaxial_figures(rows)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_3 = {sigma_c / 1e3:g} kPa, {integrator.name}"
     plot_triaxial(rows, out_dir / "triaxial.png", title, figures)
-    summary = run_summary("triaxial", scene, result, t_start)
-    summary.update(figures)
-    summary["confining_stress_Pa"] = sigma_c
-    summary["axial_strain_rate"] = shear_rate
-    summary["preparation"] = preparation(cfg, e0)
-    summary["stages"] = records
-    summary["sample_start_height"] = cell.height0
-    summary["grain_size"] = cell.grain_size
-    summary["initial_state"] = str(state_path)
-    summary["config_fingerprint"] = identity.fingerprint
-    write_json(out_dir / "summary.json", summary)
-    return summary
+    return write_summary("triaxial", scene, result, t_start, out_dir, figures, path.stage_records(), cell,
+                         state_path, identity, confining_stress_Pa=sigma_c, axial_strain_rate=shear_rate,
+                         preparation=preparation(cfg, e0))  # fmt: skip
 
 
 def envelope_panel(title: str, summaries: list[dict], fit: dict) -> tuple:
