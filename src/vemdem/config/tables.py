@@ -621,6 +621,9 @@ DIRECT_SHEAR = {
                      "the lid starts this many mean grain sizes above the pack's highest point"),
         "split": Field(float, 0.5, _in(0.2, 0.8),
                        "where the box's halves meet, as a share of the pack's height above the floor"),
+        "opening": Field(float, 0.0, _in(0, 2),
+                         "the gap between the halves' walls, in mean grain sizes (below the smallest grain), as a lab "
+                         "box's halves are set apart (docs/direct-shear.md: what 0.5 did)"),
     },
     "normal": {
         "stress": Field(float, REQUIRED, _stress, "the normal stress on the lid (Pa), held by its servo"),

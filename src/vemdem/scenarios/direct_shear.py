@@ -2,7 +2,8 @@
 
 The settled pack stays where it settled; its box becomes a shear box split at `sample.split` of
 the pack's height: the lower half (the floor and its two x sides, finite rectangles up to the
-split) can move along x, the upper half's two x sides (from the split up, past the lid) stay,
+split) can move along x, the upper half's two x sides (from `sample.opening` mean grain sizes
+above the split up, past the lid) stay,
 the two y sides are frictionless planes along the shear, and a lid starts `sample.gap` mean
 grain sizes above the pack. The floor and the lid are rough (the grains' friction): a shear box's
 plates carry the shear into the sample. Two stages:
@@ -13,8 +14,9 @@ plates carry the shear into the sample. Two stages:
 2. shear: the lower half moves along +x at a constant speed (the shear rate speed / H that gives
    `shear.inertia_number` at the normal stress, H the sample's height) while the lid's servo holds
    the normal stress; the stage ends at `shear.max_displacement` of the box's length, or at its
-   `max_time`. The halves' walls are one-sided rectangles that move apart by the travel: it stays
-   below the smallest grain (a config rule), so that no grain fits between them.
+   `max_time`. The halves' walls are one-sided rectangles that move apart by the travel, with
+   `sample.opening` between them: both stay below the smallest grain (checked), so that no grain
+   fits out between them (docs/direct-shear.md says where the test stands).
 
 sigma_n = the lid's force over the box's section, tau = the force the lower half (its floor and
 sides) carries along x over the same section; the vertical displacement is the lid's rise.
@@ -69,6 +71,11 @@ class ShearBox:
         sizes = equivalent_diameters(volumes)
         self.grain_size, smallest = float(np.mean(sizes)), float(np.min(sizes))
         self.travel_max = cfg["shear"]["max_displacement"] * self.box[0]
+        self.opening = cfg["sample"]["opening"] * self.grain_size
+        if self.opening >= smallest:
+            raise ConfigError(f"sample.opening: {self.opening * 1e3:.3g} mm between the halves would let the smallest "
+                              f"grain ({smallest * 1e3:.3g} mm) out; take less than "
+                              f"{smallest / self.grain_size:.3g}")  # fmt: skip
         if self.travel_max >= smallest:
             raise ConfigError(f"shear.max_displacement: the lower half would travel {self.travel_max * 1e3:.3g} mm, "
                               f"past the smallest grain ({smallest * 1e3:.3g} mm), which could then slip between "
@@ -85,7 +92,7 @@ class ShearBox:
         for name, x, inward in (("-x", cx - hx, 1.0), ("+x", cx + hx, -1.0)):
             v, f = _rectangle(x, cy - hy, cy + hy, below, split, inward)
             lower.append(MeshWall(v, f, self.drive, f"lower {name}"))
-            v, f = _rectangle(x, cy - hy, cy + hy, split, above, inward)
+            v, f = _rectangle(x, cy - hy, cy + hy, split + self.opening, above, inward)
             upper.append(MeshWall(v, f, name=f"upper {name}"))
         floor = PlaneWall(np.array([cx, cy, self.floor]), np.array([0.0, 0.0, 1.0]), self.drive, "floor")
         sides = [PlaneWall(np.array([cx, cy - hy, self.floor]), np.array([0.0, 1.0, 0.0]), name="wall -y",
