@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .triaxial import largest_finite, measured
+
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
           "void_ratio", "coordination", "inertia_number", "unbalanced")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
@@ -91,13 +93,8 @@ def shear_figures(rows: np.ndarray) -> dict:
     ratio = shear[:, HEADER.index("tau_over_sigma_n")]
     for name, measure in (("peak", lambda: peak(x, ratio)), ("residual", lambda: residual(x, ratio)),
                           ("dilation", lambda: dilation_angle(x, y))):  # fmt: skip
-        try:
-            out.update(measure())
-        except ValueError as error:
-            out[f"{name}_error"] = str(error)
-    inertia = shear[:, HEADER.index("inertia_number")]
-    finite = inertia[np.isfinite(inertia)]
-    out["max_inertia_number"] = float(finite.max()) if len(finite) else None
+        measured(out, name, measure)
+    out["max_inertia_number"] = largest_finite(shear[:, HEADER.index("inertia_number")])
     return out
 
 

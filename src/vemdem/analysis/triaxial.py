@@ -226,14 +226,24 @@ def triaxial_figures(rows: np.ndarray) -> dict:
                           ("critical_state", lambda: critical_state(axial, s1, s3)),
                           ("dilatancy", lambda: dilatancy_angle(axial, volumetric, dilatancy_window(axial))),
                           ("E50", lambda: {"E50_Pa": secant_modulus_50(axial, s1 - s3)})):  # fmt: skip
-        try:
-            out.update(measure())
-        except ValueError as error:
-            out[f"{name}_error"] = str(error)
-    inertia = shear[:, HEADER.index("inertia_number")]
-    finite = inertia[np.isfinite(inertia)]
-    out["max_inertia_number"] = float(finite.max()) if len(finite) else None
+        measured(out, name, measure)
+    out["max_inertia_number"] = largest_finite(shear[:, HEADER.index("inertia_number")])
     return out
+
+
+def measured(out: dict, name: str, measure) -> None:
+    """out updated with measure(), or with `{name}_error` where the run cannot give it."""
+    try:
+        out.update(measure())
+    except ValueError as error:
+        out[f"{name}_error"] = str(error)
+
+
+def largest_finite(values) -> float | None:
+    """The largest finite value (an inertia number over the frames), None where none is finite."""
+    values = np.asarray(values, dtype=float)
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if len(finite) else None
 
 
 def _eta(ratio):
