@@ -145,6 +145,7 @@ REDUCTIONS = {
     "paper-compression": reduce_lid_compression,
     "paper-compression-implicit": reduce_lid_compression,
     "paper-oedometer": reduce_oedometer,
+    "soft-oedometer": reduce_oedometer,
     "paper-pack": reduce_pack,
     "paper-pack-implicit": reduce_pack,
     "pile": reduce_pile_collapse,

@@ -95,3 +95,34 @@ def test_each_grains_largest_strain_over_the_frames_and_the_validated_range(tmp_
     summary = grain_strain_summary(strains)
     assert summary["max"] == 0.3 and summary["grain"] == 2 and summary["validated_range"] == VALIDATED_STRAIN
     assert summary["grains_past_validated_range"] == 2
+
+
+# a 4-grain oedometer loaded to 400 Pa: enough to press the grains against the side walls
+SMALL = {"scenario": "oedometer", "pack": {"n_grains": 4, "seed": 5, "grains": {"vertices": 8, "size": 1.2e-3},
+                                           "box": {"width": 3.2e-3, "depth": 3.2e-3}},
+         "settle": {"min_time": 0.04}, "output": {"every": 2e-3, "vtk": False}, "lid": {"gap": 0.01},
+         "servo": {"inertia_number": 1e-2}, "stages": [{"stress": 400.0, "max_time": 0.03}]}  # fmt: skip
+
+
+def _side_walls_vertical_force(tmp_path, ring_friction: bool):
+    from vemdem.scenarios.registry import checked_config
+
+    out = tmp_path / f"ring_{ring_friction}"
+    cfg, module = checked_config({**SMALL, "ring": {"friction": ring_friction}})
+    summary = module.run(cfg, out)
+    rows = np.genfromtxt(out / "walls.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    sides = np.isin(rows["name"], ["wall -x", "wall +x", "wall -y", "wall +y"])
+    return np.abs(rows["fz"][sides]), np.abs(rows["fx"][sides]) + np.abs(rows["fy"][sides]), summary
+
+
+def test_a_lubricated_ring_carries_no_vertical_force_and_a_rough_one_does(tmp_path):
+    """The ring's friction (`ring.friction`): smooth by default, so that the side walls press the
+    sample only along their normals and the lid's stress is the sample's; rough, they carry some
+    of the load by friction."""
+    smooth_fz, smooth_normal, summary = _side_walls_vertical_force(tmp_path, False)
+    rough_fz, rough_normal, _ = _side_walls_vertical_force(tmp_path, True)
+    assert smooth_normal.max() > 0 and rough_normal.max() > 0  # the grains press the side walls in both
+    assert smooth_fz.max() <= 1e-12 * smooth_normal.max()  # round-off of the normal force alone
+    assert rough_fz.max() > 1e-3 * rough_normal.max()
+    # the law set for the path's largest stress: 2 x 400 Pa x d^2 (scenarios/lab.contact_at_stress)
+    assert summary["contact"]["reference_force"] == pytest.approx(2 * 400.0 * summary["grain_size"] ** 2)

@@ -564,6 +564,10 @@ OEDOMETER = {
                      "the lid starts this many mean grain sizes above the pack's highest point"),
         "area": Field(float, None, positive, "loaded area of the lid (m^2) [the box's cross-section]"),
     },
+    "ring": {
+        "friction": Field(bool, False, doc="the side walls' friction: false, a lubricated ring (the lid's stress is "
+                          "the sample's; docs/oedometer.md); true, the grains' contact friction"),
+    },
     "stages": TableList(STAGE, min_items=1),
     "servo": SERVO,
     **granular_tables(mu_s=0.15, mu_d=0.15, every=5e-3),
@@ -573,6 +577,10 @@ OEDOMETER = {
 # stalled twice in its seating (Newton at 1e-10 s steps; docs/oedometer.md)
 OEDOMETER["solver"] = SOLVER
 OEDOMETER["contact"] = with_defaults(OEDOMETER["contact"], damping_ratio=0.05)  # as the lid cycle's: elastic contacts
+OEDOMETER["contact"]["reference_force"] = replace(
+    OEDOMETER["contact"]["reference_force"],
+    doc="N, force per contact at the switch gap [2 x the path's largest stress x the mean grain size squared; "
+        "the pack settles under the weight's law]")  # fmt: skip
 
 TRIAXIAL = {
     "scenario": Field(("triaxial",), REQUIRED),

@@ -94,9 +94,12 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
 def pack_config(cfg: dict) -> dict:
     """A complete `pack` config from a pile_collapse / lid_compression config's [pack] table; the
     pack settles with the same material, vem and solver settings, its own friction and the
-    default normal damping (lid_compression's light damping is for the lid cycle)."""
+    default normal damping (lid_compression's light damping is for the lid cycle) and the weight's
+    contact law."""
     table = dict(cfg["pack"])
-    contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None)
+    # the pack settles under its weight: the weight's law, whatever the test sets for its load
+    contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None,
+                   reference_force=None)
     solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
     settle = {k: field.default for k, field in SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]

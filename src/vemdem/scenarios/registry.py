@@ -37,7 +37,8 @@ EXAMPLES = {
 # the paper's own method at the real density (docs/results.md): the same runs, implicit, no mass scaling
 EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EXAMPLES) if name.startswith("paper-")})
 # the laboratory tests, at the real density
-EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml", "triaxial": "triaxial.toml",
+EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml",
+                 "soft-oedometer": "soft-oedometer.toml", "triaxial": "triaxial.toml",
                  "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml"})
 
 
