@@ -143,3 +143,35 @@ def test_the_paper_oedometer_follows_the_strain_controlled_loading_curve(tmp_pat
     out = tmp_path / "po.png"
     module.main(out)
     assert out.stat().st_size > 20_000
+
+
+def test_soft_flexible_grains_compact_past_the_rigid_jam(tmp_path):
+    """docs/oedometer.md, "Soft grains": from the same pack, at the same stress, the flexible
+    grains stand denser than the rigid ones by more than the rigid pack gains from 50 kPa on."""
+    module = _module(SCRIPT.parent / "soft_oedometer.py")
+    flexible, rigid = module.read("flexible"), module.read("rigid")
+    for stress in (50e3, 300e3):
+        assert module.packing_at(flexible, stress)[0] > module.packing_at(rigid, stress)[0] + 0.02
+    rigid_gain = rigid["packing_fraction"][module.first_loading(rigid)].max() - module.packing_at(rigid, 50e3)[0]
+    assert module.packing_at(flexible, 300e3)[0] - module.packing_at(flexible, 50e3)[0] > 3 * rigid_gain
+    assert rigid["sigma_v"].max() > 1e6  # the rigid run carried the path's stresses
+    out = tmp_path / "soft.png"
+    module.main(out)
+    assert out.stat().st_size > 20_000
+
+
+def test_the_triaxial_peak_angle_rises_with_friction_then_saturates(tmp_path):
+    """docs/triaxial.md, "The friction angle against the grains' friction": phi_peak rises from
+    mu 0.1 to 0.5 and then by less than 2 deg to 0.9; phi_cs stands in the sands' range at mu 0.3
+    and 0.5, below it at 0.1."""
+    module = _module(SCRIPT.parent / "triaxial_friction.py")
+    rigid = module.series()[("rigid", "sand")]
+    mu, peak, cs = rigid["mu"], rigid["phi_peak_deg"], rigid["phi_cs_deg"]
+    assert list(mu) == [0.1, 0.3, 0.5, 0.9]
+    assert np.all(np.diff(peak[:3]) > 5.0) and 0 <= peak[3] - peak[2] < 2.0
+    lo, hi = module.SANDS_CS_DEG
+    assert cs[0] < lo and all(lo <= c <= hi for c in cs[1:3])
+    assert np.all(peak > cs)
+    out = tmp_path / "friction.png"
+    module.main(out)
+    assert out.stat().st_size > 20_000
