@@ -20,6 +20,7 @@ from vemdem.analysis.triaxial import (
     secant_modulus_50,
     stress_ratio_from_angle,
     triaxial_figures,
+    until_sheared,
 )
 
 SIGMA_3 = 100e3
@@ -224,3 +225,15 @@ def test_triaxial_figures_measure_the_shear_from_its_start(tmp_path):
     for name in ("triaxial.png", "short.png", "envelope.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert (tmp_path / name).stat().st_size > 10_000
+
+
+def test_frames_after_the_shear_ended_are_left_out():
+    """The time loop stops at the frame after the shear stage ended: that frame's sample relaxed
+    under a standing platen, and no measure may read it; consolidation rows and a shear that did
+    not end stay."""
+    rows = np.zeros((6, len(HEADER)))
+    rows[:, HEADER.index("time")] = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05]
+    rows[:, HEADER.index("stage")] = [0, 0, 1, 1, 1, 1]
+    kept = until_sheared(rows, 0.035)
+    assert list(kept[:, HEADER.index("time")]) == [0.0, 0.01, 0.02, 0.03]
+    assert len(until_sheared(rows, "nan")) == 6 and len(until_sheared(rows, None)) == 6

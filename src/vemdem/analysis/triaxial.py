@@ -199,6 +199,17 @@ def mohr_coulomb_fit(sigma_3, sigma_1) -> dict:
     return {"phi_deg": float(np.degrees(phi)), "cohesion_Pa": intercept / float(np.cos(phi)), "r2": r2, "n": n}
 
 
+def until_sheared(rows: np.ndarray, shear_end) -> np.ndarray:
+    """The rows without the shear frames written after the shear stage ended at `shear_end` (the
+    time loop stops at the next frame: meanwhile the platen stands and the sample relaxes, which is
+    no state of the constant-rate test)."""
+    rows = np.asarray(rows, dtype=float).reshape(-1, len(HEADER))
+    if not isinstance(shear_end, float) or not np.isfinite(shear_end):  # not ended ("nan" in a record)
+        return rows
+    after = (rows[:, HEADER.index("stage")] == SHEAR) & (rows[:, HEADER.index("time")] > shear_end)
+    return rows[~after]
+
+
 def shear_strains(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The shear rows (stage == 1) of a triaxial.csv table, with their axial and volumetric strain
     measured from the first of them."""

@@ -37,7 +37,15 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.microstructure import anisotropy, coordination, fabric_tensor, love_weber_stress, pair_contacts
-from ..analysis.triaxial import FAILURE_STATES, HEADER, envelopes, plot_envelopes, plot_triaxial, triaxial_figures
+from ..analysis.triaxial import (
+    FAILURE_STATES,
+    HEADER,
+    envelopes,
+    plot_envelopes,
+    plot_triaxial,
+    triaxial_figures,
+    until_sheared,
+)
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import PlaneWall, ServoMotion
@@ -213,12 +221,14 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     duration = cfg["consolidation"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
     result, rows = run_stages(scene, integrator, out_dir, cfg, identity, initial, path, "triaxial.csv", HEADER, row,
                               lambda t, x: cell.volume(t), duration, progress, resume)  # fmt: skip
+    records = path.stage_records()
+    rows = until_sheared(rows, records[1]["end_time"] if len(records) > 1 else None)
     figures = triaxial_figures(rows)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_3 = {sigma_c / 1e3:g} kPa, {integrator.name}"
     plot_triaxial(rows, out_dir / "triaxial.png", title, figures)
-    return write_summary("triaxial", scene, result, t_start, out_dir, figures, path.stage_records(), cell,
+    return write_summary("triaxial", scene, result, t_start, out_dir, figures, records, cell,
                          state_path, identity, confining_stress_Pa=sigma_c, axial_strain_rate=shear_rate,
                          preparation=preparation(cfg, e0))  # fmt: skip
 
