@@ -165,13 +165,18 @@ def test_the_triaxial_peak_angle_rises_with_friction_then_saturates(tmp_path):
     mu 0.1 to 0.5 and then by less than 2 deg to 0.9; phi_cs stands in the sands' range at mu 0.3
     and 0.5, below it at 0.1."""
     module = _module(SCRIPT.parent / "triaxial_friction.py")
-    rigid = module.series()[("rigid", "sand")]
+    rigid = module.series()[("rigid", "sand", 1.0)]
     mu, peak, cs = rigid["mu"], rigid["phi_peak_deg"], rigid["phi_cs_deg"]
     assert list(mu) == [0.1, 0.3, 0.5, 0.9]
     assert np.all(np.diff(peak[:3]) > 5.0) and 0 <= peak[3] - peak[2] < 2.0
     lo, hi = module.SANDS_CS_DEG
     assert cs[0] < lo and all(lo <= c <= hi for c in cs[1:3])
     assert np.all(peak > cs)
+    # every series: the critical state stands in the sands' range from mu 0.3 on, below it at 0.1
+    # (sand at the real density, mu 0.9: a collapse in its window, docs/triaxial.md)
+    for key, series in module.series().items():
+        plateau = series["phi_cs_deg"][1:] if key != ("rigid", "sand", 1.0) else series["phi_cs_deg"][1:3]
+        assert series["phi_cs_deg"][0] < lo and np.all((plateau >= lo) & (plateau <= hi)), key
     out = tmp_path / "friction.png"
     module.main(out)
     assert out.stat().st_size > 20_000

@@ -4,8 +4,9 @@
 
 Reads triaxial_friction.csv beside this file: one row per triaxial run (the `summary.json` of
 `vemdem sweep triaxial.toml --set contact.mu_s=... --set contact.mu_d=... --zip`, the example's
-100 grains, dense, 50 kPa), with the grain model and shape it ran with. Draws phi_peak and phi_cs
-(with its spread over the last 5 % of strain) against mu per grain model and shape, beside the
+100 grains, dense, 50 kPa), with the grain model, shape and mass scaling it ran with (s = 100: the real density's strain
+rate at I = 5e-4, docs/triaxial.md). Draws phi_peak and phi_cs (with its spread over the last 5 %
+of strain) against mu per grain model, shape and scaling, beside the
 range of sands' critical-state angles (30-37 deg) and prints the table. Writes
 docs/img/triaxial_friction.png by default.
 """
@@ -28,13 +29,14 @@ NUMBERS = ("mu", "phi_peak_deg", "phi_cs_deg", "phi_cs_spread_deg", "dilatancy_a
            "wall_seconds")  # fmt: skip
 
 
-def series(path: Path = HERE / "triaxial_friction.csv") -> dict[tuple[str, str], dict[str, np.ndarray]]:
-    """{(grain model, shape): {column: values sorted by mu}}."""
+def series(path: Path = HERE / "triaxial_friction.csv") -> dict[tuple[str, str, float], dict[str, np.ndarray]]:
+    """{(grain model, shape, mass scaling): {column: values sorted by mu}}."""
     with path.open() as f:
         rows = list(csv.DictReader(f))
     out = {}
-    for key in sorted({(r["grains"], r["shape"]) for r in rows}):
-        mine = sorted((r for r in rows if (r["grains"], r["shape"]) == key), key=lambda r: float(r["mu"]))
+    key_of = lambda r: (r["grains"], r["shape"], float(r["mass_scaling"]))  # noqa: E731
+    for key in sorted({key_of(r) for r in rows}):
+        mine = sorted((r for r in rows if key_of(r) == key), key=lambda r: float(r["mu"]))
         out[key] = {k: np.array([float(r[k]) for r in mine]) for k in NUMBERS}
     return out
 
@@ -43,23 +45,24 @@ def main(out: Path) -> None:
     data = series()
     fig, ax = plt.subplots(figsize=(7.0, 4.6))
     ax.axhspan(*SANDS_CS_DEG, color="0.85", label="sands, critical state")
-    for i, ((grains, shape), s) in enumerate(data.items()):
-        colour = f"C{i}"
-        ax.plot(s["mu"], s["phi_peak_deg"], "o-", color=colour, label=f"{grains}, {shape}: peak")
+    for i, ((grains, shape, scaling), s) in enumerate(data.items()):
+        colour, name = f"C{i}", f"{grains}, {shape}, s = {scaling:g}"
+        ax.plot(s["mu"], s["phi_peak_deg"], "o-", color=colour, label=f"{name}: peak")
         ax.errorbar(s["mu"], s["phi_cs_deg"], yerr=s["phi_cs_spread_deg"], fmt="s--", color=colour, capsize=3,
-                    label=f"{grains}, {shape}: critical state")  # fmt: skip
+                    label=f"{name}: critical state")  # fmt: skip
     ax.set(xlabel="interparticle friction mu", ylabel="friction angle (deg)",
-           title="drained triaxial, 100 grains, dense, 50 kPa")  # fmt: skip
+           title="drained triaxial, 100 grains, dense, 50 kPa")
+    ax.set_ylim(15, 60)  # fmt: skip
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
-    print("| grains | shape | mu | phi_peak | phi_cs (spread) | dilatancy | max I | wall s |")
-    print("|---|---|---|---|---|---|---|---|")
-    for (grains, shape), s in data.items():
+    print("| grains | shape | mass scaling | mu | phi_peak | phi_cs (spread) | dilatancy | max I | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for (grains, shape, scaling), s in data.items():
         for j in range(len(s["mu"])):
-            print(f"| {grains} | {shape} | {s['mu'][j]:g} | {s['phi_peak_deg'][j]:.1f} | {s['phi_cs_deg'][j]:.1f} "
+            print(f"| {grains} | {shape} | {scaling:g} | {s['mu'][j]:g} | {s['phi_peak_deg'][j]:.1f} | {s['phi_cs_deg'][j]:.1f} "
                   f"({s['phi_cs_spread_deg'][j]:.1f}) | {s['dilatancy_angle_deg'][j]:.1f} | "
                   f"{s['max_inertia_number'][j]:.1e} | {s['wall_seconds'][j]:.0f} |")  # fmt: skip
 
