@@ -72,17 +72,19 @@ class SpringBehindLayer:
         return np.array([self.K])
 
 
-def _servo_steps(K, k_s, gain, target_force, steps, h=1e-4, cap_share=0.08):
+def _servo_steps(K, k_s, gain, target_force, steps, h=1e-4, cap_share=0.08, drift=None, keep_secant=False):
     """The forces after each step. The speed cap moves the force by cap_share of the target per
-    step: 0.08 seats the wall in two steps and never binds the law after (gain RAMP < 0.08)."""
+    step: 0.08 seats the wall in two steps and never binds the law after (gain RAMP < 0.08).
+    drift(n): the force added by step n from elsewhere (a platen's shear on a lateral wall)."""
     contact = SpringBehindLayer(K, k_s)
     lid = PlaneWall(np.zeros(3), np.array([0.0, 0.0, -1.0]), ServoMotion((0.0, 0.0, -1.0)), "lid")
     cap = cap_share * target_force / (contact.k_eff * h)
     servo = Servo(contact, lid, 1.0, gain=gain, target=target_force, max_speed=cap)
+    servo.keep_secant = keep_secant
     forces = []
     for n in range(1, steps + 1):
         t = n * h
-        force = contact.k_eff * servo.travel_at(t)
+        force = contact.k_eff * servo.travel_at(t) + (0.0 if drift is None else drift(n))
         servo.measure(np.array([[0.0, 0.0, force]]), None, None, t)
         lid.motion.steer(t, servo.speed(h))
         forces.append(force)
@@ -109,6 +111,28 @@ def test_the_force_error_shrinks_by_one_minus_gain_per_step_on_a_linear_sample(r
     if ramp.any():
         assert np.allclose((forces[2:] / forces[1:-1])[ramp], 1 + gain * RAMP, rtol=1e-6)
     assert forces.max() <= target
+
+
+@pytest.mark.parametrize("ratio", [0.05, 1e-3])
+def test_a_wall_backs_off_a_force_raised_from_elsewhere_with_a_lag_of_its_rise_over_gain(ratio):
+    """Once at its target the wall's force is raised by r per step from elsewhere (a lateral wall
+    while the platen shears the sample): the wall backs off, its secant falls outside the range
+    (the force rises while it retreats) and a holding wall keeps its last one inside it, so the
+    error obeys e_(n+1) = (1 - gain) e_n - r and settles at -r / gain. On the layer's K the lag
+    is r K / (gain k_sample), 20 times that here, or more than RAMP of the force."""
+    K, gain, target, r = 1e6, 0.3, 2.0, 2e-3
+    k_eff = K * ratio
+    k_s = k_eff * K / (K - k_eff)
+    held = 200  # steps to reach the target first
+    drift = lambda n: r * max(n - held, 0)  # noqa: E731
+
+    forces = _servo_steps(K, k_s, gain, target, held + 300, drift=drift, keep_secant=True)
+    assert abs(forces[held - 1] - target) < 1e-9 * target
+    lag = forces[held:] - target
+    assert np.all(lag <= r / gain * (1 + 1e-9))
+    assert lag[-1] == pytest.approx(r / gain, rel=1e-6)
+    on_layer = _servo_steps(K, k_s, gain, target, held + 300, drift=drift)
+    assert on_layer[-1] - target > min(0.9 * r * K / (gain * k_eff), RAMP * target)
 
 
 def test_a_wall_seats_at_its_speed_cap_until_it_carries_a_tenth_of_its_target():
