@@ -31,11 +31,11 @@ stiffness: a flexible triaxial's lateral walls, on implicit steps a hundred time
 grains' explicit ones, let the confining stress rise from 50 kPa to 507 kPa at 7 % axial strain.
 Such a wall keeps its last good secant instead (keep_secant). Not every wall does: a cube pressed
 between the floor and a lid that kept it swung about its target in a limit cycle (+-3 %) where
-the layer's K, 15 % stiffer, let it settle (docs/servo.md). A clipped secant made the 60-grain oedometer's lid swing between its speed caps
-at every step (docs/servo.md). The
-step length cancels, so a halved step moves the wall by as much per step. Where no record
-touches the wall (K = 0) it moves at v_max towards or away from the grains. v_max is the real
-speed cap: the scenario sets it from the inertia number the test must stay below (docs/servo.md).
+the layer's K, 15 % stiffer, let it settle (docs/servo.md). A clipped secant made the 60-grain
+oedometer's lid swing between its speed caps at every step (docs/servo.md). The step length
+cancels, so a halved step moves the wall by as much per step. Where no record touches the wall
+(K = 0) it moves at v_max towards or away from the grains. v_max is the real speed cap: the
+scenario sets it from the inertia number the test must stay below (docs/servo.md).
 
 A wall with mass under a force was the other choice: its extra degree of freedom would enter
 every Newton system and the explicit step's stability, where this law needs neither (docs/servo.md).
