@@ -168,12 +168,14 @@ def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
-    test = Oedometer(cfg, initial)
-    # the law set for the path's largest stress: under the weight's law the lid's load squeezes the
-    # contacts to nanometre gaps, where steps fall to 1e-8 s (docs/oedometer.md)
+    # the law set for the path's largest stress (under the weight's law the lid's load squeezes the
+    # contacts to nanometre gaps, where steps fall to 1e-8 s), the pack settled under it too
+    # (docs/oedometer.md)
     largest = max(s["stress"] for s in cfg["stages"])
-    scene = scene_from(initial.grains, contact_at_stress(cfg, largest, test.grain_size), test.walls)
+    cfg = contact_at_stress(cfg, largest, cfg["pack"]["grains"]["size"])
+    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume, cfg["contact"]["reference_force"])
+    test = Oedometer(cfg, initial)
+    scene = scene_from(initial.grains, cfg, test.walls)
     test.bind(scene, out_dir)
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density

@@ -91,15 +91,15 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
 
 
 # ---------------------------------------------------------------------------- the pack stage
-def pack_config(cfg: dict) -> dict:
-    """A complete `pack` config from a pile_collapse / lid_compression config's [pack] table; the
-    pack settles with the same material, vem and solver settings, its own friction and the
-    default normal damping (lid_compression's light damping is for the lid cycle) and the weight's
-    contact law."""
+def pack_config(cfg: dict, reference_force: float | None = None) -> dict:
+    """A complete `pack` config from a scenario's [pack] table; the pack settles with the same
+    material, vem and solver settings, its own friction and the default normal damping
+    (lid_compression's light damping is for the lid cycle), and the weight's contact law unless
+    `reference_force` names the law the test will load it with (a pack settled under the weight's
+    law meets a stiffer law with every contact's force multiplied by their ratio)."""
     table = dict(cfg["pack"])
-    # the pack settles under its weight: the weight's law, whatever the test sets for its load
     contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None,
-                   reference_force=None)
+                   reference_force=reference_force)
     solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
     settle = {k: field.default for k, field in SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
@@ -142,14 +142,16 @@ def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = F
     run(pack_cfg, pack_dir, progress=stage, resume=resume_pack)
 
 
-def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume: bool = False):
+def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume: bool = False,
+                       reference_force: float | None = None):  # fmt: skip
     """The settled pack a scenario starts from: `initial_state` (relative to the config file) when
-    given, else a pack settled now into DIR/pack. A finished pack stage is reused only when it was
-    made by the same pack config; an interrupted one is continued by --resume."""
+    given, else a pack settled now into DIR/pack (under the contact law of `reference_force`,
+    pack_config). A finished pack stage is reused only when it was made by the same pack config;
+    an interrupted one is continued by --resume."""
     if not cfg["initial_state"]:
         pack_dir = Path(out_dir) / "pack"
         path = pack_dir / "state.npz"
-        settle_stage(pack_config(cfg), pack_dir, progress, resume)
+        settle_stage(pack_config(cfg, reference_force), pack_dir, progress, resume)
     else:
         path = resolve_path(cfg["initial_state"], base_dir)
     try:
