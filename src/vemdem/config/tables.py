@@ -640,8 +640,8 @@ DIRECT_SHEAR = {
     },
     "shear": {
         "max_displacement": Field(float, 0.15, _in(0.01, 0.5),
-                                  "the lower half's travel, as a share of the box's length along x; below the "
-                                  "smallest grain, so that no grain fits between the halves' walls"),
+                                  "the lower half's travel, as a share of the box's length along x (the frames' "
+                                  "plates close the box's ends past it)"),
         "inertia_number": Field(float, 5e-4, _in(0, 1e-2, lo_open=True),
                                 "sets the lower half's speed: the shear rate (speed / sample height) that gives "
                                 "this inertia number at the normal stress"),

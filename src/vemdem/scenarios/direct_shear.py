@@ -15,8 +15,12 @@ plates carry the shear into the sample. Two stages:
    `shear.inertia_number` at the normal stress, H the sample's height) while the lid's servo holds
    the normal stress; the stage ends at `shear.max_displacement` of the box's length, or at its
    `max_time`. The halves' walls are one-sided rectangles that move apart by the travel, with
-   `sample.opening` between them: both stay below the smallest grain (checked), so that no grain
-   fits out between them (docs/direct-shear.md says where the test stands).
+   `sample.opening` between them (below the smallest grain, checked). Where the halves' ends no
+   longer face each other, two horizontal plates close the box as a lab box's frames do: the lower
+   half's -x end carries a plate at the split that reaches outwards past the travel (the upper
+   half's grains above the lower half's vacated end rest on it), and the upper half's +x end a
+   plate just above the split that reaches outwards past the travel (it holds down the lower
+   half's grains that have moved out under it); docs/direct-shear.md says where the test stands.
 
 sigma_n = the lid's force over the box's section, tau = the force the lower half (its floor and
 sides) carries along x over the same section; the vertical displacement is the lid's rise.
@@ -37,6 +41,7 @@ from ..analysis.direct_shear import HEADER, plot_shear, shear_figures
 from ..analysis.microstructure import coordination
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
+from ..contact.defaults import GAP_FRACTION
 from ..contact.walls import MeshWall, PlaneWall, ServoMotion
 from ..driver.stages import unbalanced_force
 from ..geometry.mass import body_volumes
@@ -49,15 +54,27 @@ from .pack import initial_state_from
 
 RESUMABLE = True
 SCHEMA = tables.DIRECT_SHEAR
-LOWER = ("floor", "lower -x", "lower +x")  # the walls that move with the lower half
+LOWER = ("floor", "lower -x", "lower +x", "lower -x plate")  # the walls that move with the lower half
 
 
-def _rectangle(x: float, y0: float, y1: float, z0: float, z1: float, inward: float) -> tuple[np.ndarray, np.ndarray]:
-    """A rectangle in the plane x = const from (y0, z0) to (y1, z1), its two triangles wound so
-    that their normals point along `inward` (+1 or -1 along x)."""
-    v = np.array([[x, y0, z0], [x, y1, z0], [x, y1, z1], [x, y0, z1]])
-    faces = np.array([[0, 1, 2], [0, 2, 3]]) if inward > 0 else np.array([[0, 2, 1], [0, 3, 2]])
+def _quad(corners, normal) -> tuple[np.ndarray, np.ndarray]:
+    """A planar rectangle through four corners in order, its two triangles wound so that their
+    normals point along `normal` (a mesh wall pushes grains along its triangles' normals)."""
+    v = np.asarray(corners, dtype=float)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    if np.dot(np.cross(v[1] - v[0], v[2] - v[0]), normal) < 0:
+        faces = faces[:, ::-1]
     return v, faces
+
+
+def _side(x: float, y0: float, y1: float, z0: float, z1: float, inward: float) -> tuple[np.ndarray, np.ndarray]:
+    """A rectangle in the plane x = const from (y0, z0) to (y1, z1), facing `inward` (+1 or -1) along x."""
+    return _quad([[x, y0, z0], [x, y1, z0], [x, y1, z1], [x, y0, z1]], (inward, 0.0, 0.0))
+
+
+def _plate(z: float, x0: float, x1: float, y0: float, y1: float, up: float) -> tuple[np.ndarray, np.ndarray]:
+    """A rectangle in the plane z = const over [x0, x1] x [y0, y1], facing `up` (+1 or -1) along z."""
+    return _quad([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], (0.0, 0.0, up))
 
 
 class ShearBox:
@@ -76,11 +93,6 @@ class ShearBox:
             raise ConfigError(f"sample.opening: {self.opening * 1e3:.3g} mm between the halves would let the smallest "
                               f"grain ({smallest * 1e3:.3g} mm) out; take less than "
                               f"{smallest / self.grain_size:.3g}")  # fmt: skip
-        if self.travel_max >= smallest:
-            raise ConfigError(f"shear.max_displacement: the lower half would travel {self.travel_max * 1e3:.3g} mm, "
-                              f"past the smallest grain ({smallest * 1e3:.3g} mm), which could then slip between "
-                              "the halves' walls; take less than "
-                              f"{smallest / self.box[0]:.3g}")  # fmt: skip
         top = float(initial.x[:, 2].max())
         self.height0 = top - self.floor + cfg["sample"]["gap"] * self.grain_size
         split = self.floor + cfg["sample"]["split"] * (top - self.floor)
@@ -90,10 +102,19 @@ class ShearBox:
         self.drive = ServoMotion((1.0, 0.0, 0.0))  # the lower half's motion, shared by its walls
         lower, upper = [], []
         for name, x, inward in (("-x", cx - hx, 1.0), ("+x", cx + hx, -1.0)):
-            v, f = _rectangle(x, cy - hy, cy + hy, below, split, inward)
+            v, f = _side(x, cy - hy, cy + hy, below, split, inward)
             lower.append(MeshWall(v, f, self.drive, f"lower {name}"))
-            v, f = _rectangle(x, cy - hy, cy + hy, split + self.opening, above, inward)
+            v, f = _side(x, cy - hy, cy + hy, split + self.opening, above, inward)
             upper.append(MeshWall(v, f, name=f"upper {name}"))
+        # the frames' plates, reaching a grain past the travel outwards from the halves' ends; their
+        # inner edges stand back from the sides' edges by twice the contact layer, so that a grain
+        # pressed on a side near the split is not pushed by the plate's edge too
+        reach = self.travel_max + self.grain_size
+        back = 2.0 * (cfg["contact"]["activation_gap"] or GAP_FRACTION * self.grain_size)
+        v, f = _plate(split, cx - hx - reach, cx - hx - back, cy - hy, cy + hy, 1.0)
+        lower.append(MeshWall(v, f, self.drive, "lower -x plate"))
+        v, f = _plate(split + self.opening, cx + hx + back, cx + hx + reach, cy - hy, cy + hy, -1.0)
+        upper.append(MeshWall(v, f, name="upper +x plate"))
         floor = PlaneWall(np.array([cx, cy, self.floor]), np.array([0.0, 0.0, 1.0]), self.drive, "floor")
         sides = [PlaneWall(np.array([cx, cy - hy, self.floor]), np.array([0.0, 1.0, 0.0]), name="wall -y",
                            frictionless=True),
