@@ -156,6 +156,10 @@ class RigidExplicit(ExplicitIntegrator):
         super().__init__(scene, params)
         b = scene.bodies
         self.bodies = b
+        # a point at distance rho from a grain's centre moves along a normal under a unit force as
+        # 1/m + rho^2 / I_min at most; a pair has two such sides
+        rho2 = np.maximum.reduceat(np.sum(b.body**2, axis=1), b.vertex_ptr[:-1])
+        self.entry_inverse_mass = 2.0 * float(np.max(1.0 / b.mass + rho2 / b.moments.min(axis=1)))
 
     # ------------------------------------------------------------------ placement <-> vertices
     def vertex_motion(self, centre, rotation, velocity, momentum):
