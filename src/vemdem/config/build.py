@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contact.defaults import default_contact_laws
+from ..contact.defaults import GAP_FRACTION, default_contact_laws
 from ..contact.walls import Motion, PlaneWall, ServoMotion
 from ..geometry.overlap import first_overlap
 from ..geometry.polyhedron import GeometryError, Polyhedron
@@ -167,6 +167,12 @@ def build_walls(specs: list, base_dir=None):
 
 
 # ---------------------------------------------------------------------------- the scene
+def activation_gap_from(cfg: dict, size: float) -> float:
+    """The contact layer's thickness scene_from gives grains of mean equivalent diameter `size`:
+    for walls placed before the scene is built."""
+    return cfg["contact"]["activation_gap"] or GAP_FRACTION * size
+
+
 def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scene:
     """A scene of placed grains and walls with the config's material, vem, contact and solver
     (mass scaling) settings; the contact laws' scales come from the mean grain size."""

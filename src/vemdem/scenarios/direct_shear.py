@@ -40,8 +40,7 @@ import numpy as np
 from ..analysis.direct_shear import HEADER, plot_shear, shear_figures
 from ..analysis.microstructure import coordination
 from ..config import ConfigError, tables
-from ..config.build import scene_from, solver_options_from
-from ..contact.defaults import GAP_FRACTION
+from ..config.build import activation_gap_from, scene_from, solver_options_from
 from ..contact.walls import MeshWall, PlaneWall, ServoMotion
 from ..driver.stages import unbalanced_force
 from ..geometry.mass import body_volumes
@@ -110,7 +109,7 @@ class ShearBox:
         # inner edges stand back from the sides' edges by twice the contact layer, so that a grain
         # pressed on a side near the split is not pushed by the plate's edge too
         reach = self.travel_max + self.grain_size
-        back = 2.0 * (cfg["contact"]["activation_gap"] or GAP_FRACTION * self.grain_size)
+        back = 2.0 * activation_gap_from(cfg, self.grain_size)
         v, f = _plate(split, cx - hx - reach, cx - hx - back, cy - hy, cy + hy, 1.0)
         lower.append(MeshWall(v, f, self.drive, "lower -x plate"))
         v, f = _plate(split + self.opening, cx + hx + back, cx + hx + reach, cy - hy, cy + hy, -1.0)
