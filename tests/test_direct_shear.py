@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from vemdem.analysis.direct_shear import HEADER, dilation_angle, peak, residual, shear_figures
-from vemdem.config import ConfigError
 from vemdem.scenarios.registry import checked_config
 
 SIGMA_N = 20e3

@@ -141,7 +141,7 @@ class ExplicitIntegrator:
         The entry is also kept stable: a pair that enters by p meets the stiffness k(p) within the
         step, which must then be below the pair's critical step (`entry_depth`); with a law far
         stiffer than the weight's a step of e gbar / s entered the layer at several times its
-        critical step, and two cubes closing at 0.1 m/s rebounded at 73 times that speed."""
+        critical step, and two cubes at 0.1 m/s each rebounded at 73 times that speed."""
         scene, f = self.scene, self.params.approach_fraction
         gbar = scene.contact.law.activation_gap
         G = scene.n_grains
