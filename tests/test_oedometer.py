@@ -128,3 +128,29 @@ def test_a_lubricated_ring_carries_no_vertical_force_and_a_rough_one_does(tmp_pa
     # (scenarios/lab.contact_at_stress), so that the pack settles under the law the test loads with
     d = SMALL["pack"]["grains"]["size"]
     assert summary["contact"]["reference_force"] == pytest.approx(2 * 400.0 * d**2)
+
+
+def test_a_sweeps_shared_pack_is_the_one_the_oedometer_settles_and_may_be_rigid(tmp_path):
+    """A sweep settles its cases' shared pack from registry.pack_stage, and the run then finds it
+    in DIR/pack: for the oedometer that pack is settled under the test's law (the one its run
+    settles; a pack under the weight's law would be refused there as another pack).
+    `[pack] model = "rigid"` settles it with rigid grains and explicit steps for a flexible test."""
+    import json
+
+    from vemdem.scenarios.oedometer import pack_config_for
+    from vemdem.scenarios.pack import initial_state_from
+    from vemdem.scenarios.registry import checked_config, pack_stage, settle_pack
+
+    raw = {**SMALL, "pack": {**SMALL["pack"], "model": "rigid"}}
+    fingerprint, config = pack_stage(raw)
+    d = SMALL["pack"]["grains"]["size"]
+    assert config["contact"]["reference_force"] == pytest.approx(2 * 400.0 * d**2)
+    assert config["model"]["grains"] == "rigid" and config["solver"]["integrator"] == "explicit"
+    settle_pack(config, tmp_path / "pack")
+    assert json.loads((tmp_path / "pack" / "summary.json").read_text())["config_fingerprint"] == fingerprint
+    cfg, _ = checked_config(raw)
+    assert cfg["model"]["grains"] == "flexible"
+    state, path = initial_state_from(cfg, None, tmp_path, pack_cfg=pack_config_for(cfg))  # reused, not refused
+    assert path == tmp_path / "pack" / "state.npz" and state.x.shape[0] > 0
+    _, flexible = pack_stage(SMALL)
+    assert flexible["model"]["grains"] == "flexible" and flexible["solver"]["integrator"] == "implicit"

@@ -440,6 +440,10 @@ def pack_stage() -> dict:
     table["mu_s"] = Field(float, 0.6, non_negative, "friction while settling")
     table["mu_d"] = Field(float, 0.5, non_negative, "friction while settling")
     table["mass_damping"] = Field(float, SETTLING_DAMPING, _MASS_DAMPING, "1/s, mass damping while settling")
+    table["model"] = Field(("same", "rigid"), "same",
+                           doc="the grains the pack settles with: same, the run's [model] grains; rigid, rigid grains "
+                               "and explicit steps (a stiff grain strains by nanometres under its weight, so the pack "
+                               "is the flexible one's at a fraction of the cost; docs/oedometer.md)")  # fmt: skip
     return table
 
 

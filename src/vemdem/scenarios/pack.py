@@ -101,10 +101,13 @@ def pack_config(cfg: dict, reference_force: float | None = None) -> dict:
     contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None,
                    reference_force=reference_force)
     solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
+    model = cfg["model"]
+    if table.pop("model") == "rigid":
+        model, solver = {**model, "grains": "rigid"}, dict(solver, integrator="explicit")
     settle = {k: field.default for k, field in SCHEMA["settle"].items()}
     settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
     return {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
-            "model": cfg["model"],
+            "model": model,
             "contact": contact, "solver": solver, "settle": settle,
             "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
 
@@ -143,15 +146,16 @@ def settle_stage(pack_cfg: dict, pack_dir: Path, progress=None, resume: bool = F
 
 
 def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume: bool = False,
-                       reference_force: float | None = None):  # fmt: skip
+                       pack_cfg: dict | None = None):  # fmt: skip
     """The settled pack a scenario starts from: `initial_state` (relative to the config file) when
-    given, else a pack settled now into DIR/pack (under the contact law of `reference_force`,
-    pack_config). A finished pack stage is reused only when it was made by the same pack config;
-    an interrupted one is continued by --resume."""
+    given, else a pack settled now into DIR/pack from `pack_cfg` (by default pack_config(cfg); a
+    scenario whose pack settles otherwise names it as its module's `pack_config_for`, which a
+    sweep's shared packs use too). A finished pack stage is reused only when it was made by the
+    same pack config; an interrupted one is continued by --resume."""
     if not cfg["initial_state"]:
         pack_dir = Path(out_dir) / "pack"
         path = pack_dir / "state.npz"
-        settle_stage(pack_config(cfg, reference_force), pack_dir, progress, resume)
+        settle_stage(pack_cfg if pack_cfg is not None else pack_config(cfg), pack_dir, progress, resume)
     else:
         path = resolve_path(cfg["initial_state"], base_dir)
     try:

@@ -75,7 +75,7 @@ def pack_stage(raw: dict) -> tuple[str, dict] | None:
     from . import pack
     from .identity import run_identity
 
-    config = pack.pack_config(cfg)
+    config = getattr(module, "pack_config_for", pack.pack_config)(cfg)
     return run_identity(config, pack.SCHEMA).fingerprint, config
 
 
