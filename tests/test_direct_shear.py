@@ -141,3 +141,33 @@ def test_the_frames_plates_close_the_box_past_the_travel():
     # the plates span the box's depth, and the sides still face into the box
     assert np.ptp(lower.vertices[:, 1]) == pytest.approx(3e-3) and np.ptp(upper.vertices[:, 1]) == pytest.approx(3e-3)
     assert np.allclose(_normals(walls["lower -x"]), [1, 0, 0]) and np.allclose(_normals(walls["upper +x"]), [-1, 0, 0])
+
+
+def test_the_upper_frame_rides_with_the_lids_rise_and_never_sinks():
+    """The upper frame's speed rule (DirectShearPath.frame_speed), steered step by step along a lid
+    that rises, sinks below where the shear began, and rises again: the frame follows the rise,
+    stops at its start while the lid is below it, and moves again only once the lid is back above
+    the frame."""
+    from types import SimpleNamespace
+
+    from vemdem.contact.walls import ServoMotion
+    from vemdem.scenarios.direct_shear import DirectShearPath
+
+    cell = SimpleNamespace(lid=SimpleNamespace(motion=ServoMotion((0.0, 0.0, -1.0))), drive=ServoMotion((1, 0, 0)),
+                           frame=ServoMotion((0.0, 0.0, 1.0)))  # fmt: skip
+    path = DirectShearPath.__new__(DirectShearPath)
+    path.cell, path.start = cell, (0.0, 0.0, 0.0)
+    dt, rise, lifted = 1e-4, [], []
+    lid_up = [1e-3] * 10 + [-1e-3] * 20 + [1e-3] * 20  # m/s: up by 1 um, down to 1 um below, up to 1 um above
+    for i, up in enumerate(lid_up):
+        t = i * dt
+        cell.lid.motion.steer(t, -up)
+        cell.frame.steer(t, path.frame_speed(t))
+        rise.append(path.displacements(t + dt)[1])
+        lifted.append(cell.frame.travel(t + dt))
+    rise, lifted = np.array(rise), np.array(lifted)
+    np.testing.assert_allclose(lifted[:10], rise[:10], atol=1e-15)  # rides up with the lid
+    assert lifted.min() >= -1e-15  # never below its start
+    expected = np.maximum(rise, 0.0)
+    assert np.max(np.abs(lifted - expected)) <= 1e-3 * dt + 1e-15  # within one step's travel of max(rise, 0)
+    assert lifted[-1] == pytest.approx(rise[-1], abs=1e-3 * dt)

@@ -24,7 +24,7 @@ import numpy as np
 from .triaxial import largest_finite, measured
 
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
-          "void_ratio", "coordination", "inertia_number", "unbalanced")  # fmt: skip
+          "void_ratio", "coordination", "inertia_number", "unbalanced", "frame_rise")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
 RESIDUAL_WINDOW = 0.2  # the share of the shear displacement the residual ratio is the mean over
 

@@ -99,12 +99,13 @@ class ShearBox:
         below = self.floor - self.grain_size
         hx, hy = 0.5 * self.box[0], 0.5 * self.box[1]
         self.drive = ServoMotion((1.0, 0.0, 0.0))  # the lower half's motion, shared by its walls
+        self.frame = ServoMotion((0.0, 0.0, 1.0))  # the upper half's rise with the sample, shared by its walls
         lower, upper = [], []
         for name, x, inward in (("-x", cx - hx, 1.0), ("+x", cx + hx, -1.0)):
             v, f = _side(x, cy - hy, cy + hy, below, split, inward)
             lower.append(MeshWall(v, f, self.drive, f"lower {name}"))
             v, f = _side(x, cy - hy, cy + hy, split + self.opening, above, inward)
-            upper.append(MeshWall(v, f, name=f"upper {name}"))
+            upper.append(MeshWall(v, f, self.frame, f"upper {name}"))
         # the frames' plates, reaching a grain past the travel outwards from the halves' ends; their
         # inner edges stand back from the sides' edges by twice the contact layer, so that a grain
         # pressed on a side near the split is not pushed by the plate's edge too
@@ -113,7 +114,7 @@ class ShearBox:
         v, f = _plate(split, cx - hx - reach, cx - hx - back, cy - hy, cy + hy, 1.0)
         lower.append(MeshWall(v, f, self.drive, "lower -x plate"))
         v, f = _plate(split + self.opening, cx + hx + back, cx + hx + reach, cy - hy, cy + hy, -1.0)
-        upper.append(MeshWall(v, f, name="upper +x plate"))
+        upper.append(MeshWall(v, f, self.frame, "upper +x plate"))
         floor = PlaneWall(np.array([cx, cy, self.floor]), np.array([0.0, 0.0, 1.0]), self.drive, "floor")
         sides = [PlaneWall(np.array([cx, cy - hy, self.floor]), np.array([0.0, 1.0, 0.0]), name="wall -y",
                            frictionless=True),
@@ -144,7 +145,7 @@ class DirectShearPath(TwoStagePath):
 
     def __init__(self, cell: ShearBox, servo: Servo, cfg: dict, speed: float, lumped, vertex_ptr):
         super().__init__([servo], cfg["normal"]["stress"], (cfg["normal"]["max_time"], cfg["shear"]["max_time"]),
-                         cfg["servo"], lumped, vertex_ptr, motions=(cell.drive,))  # fmt: skip
+                         cfg["servo"], lumped, vertex_ptr, motions=(cell.drive, cell.frame))  # fmt: skip
         self.cell, self.speed = cell, float(speed)
 
     def begin(self, t: float) -> tuple:
@@ -168,6 +169,17 @@ class DirectShearPath(TwoStagePath):
     def steer(self, t: float) -> None:
         self.servos[0].steer(t)
         self.cell.drive.steer(t, self.speed if self.current == 1 else 0.0)
+        self.cell.frame.steer(t, self.frame_speed(t) if self.current == 1 else 0.0)
+
+    def frame_speed(self, t: float) -> float:
+        """The upper frame rides with the lid's rise from the shear's start, never below where it
+        stood (a lab box's upper frame lifts with a dilating sample, so that a grain caught at its
+        edge lifts it instead of being crushed; it does not sink into the lower one)."""
+        up = -self.cell.lid.motion.speed
+        rise, lifted = self.displacements(t)[1], self.cell.frame.travel(t)
+        if up > 0.0:
+            return up if rise >= lifted else 0.0
+        return up if lifted > 0.0 else 0.0
 
 
 def frame_row(cell: ShearBox, path: DirectShearPath, scene, state, contact, walls: tuple, density: float) -> list:
@@ -182,7 +194,8 @@ def frame_row(cell: ShearBox, path: DirectShearPath, scene, state, contact, wall
     ratio = tau / sigma_n if sigma_n > 0 else np.nan
     stage = min(path.current, len(STAGES) - 1)
     unbalanced = unbalanced_force(state, scene.bodies.lumped, scene.bodies.vertex_ptr, contact)
-    return [t, stage, x, y, sigma_n, tau, ratio, cell.volume(t) / solids - 1.0, z_m, inertia, unbalanced]
+    return [t, stage, x, y, sigma_n, tau, ratio, cell.volume(t) / solids - 1.0, z_m, inertia, unbalanced,
+            cell.frame.travel(t)]  # fmt: skip
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
