@@ -182,8 +182,8 @@ def pack_config_for(cfg: dict) -> dict:
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
     cfg = with_test_law(cfg)
+    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
     test = Oedometer(cfg, initial)
     scene = scene_from(initial.grains, cfg, test.walls)
     test.bind(scene, out_dir)
