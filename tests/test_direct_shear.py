@@ -8,7 +8,16 @@ import json
 import numpy as np
 import pytest
 
-from vemdem.analysis.direct_shear import HEADER, dilation_angle, peak, residual, shear_figures
+from vemdem.analysis.direct_shear import (
+    HEADER,
+    coulomb_fit,
+    dilation_angle,
+    peak,
+    peak_stresses,
+    residual,
+    residual_stresses,
+    shear_figures,
+)
 from vemdem.scenarios.registry import checked_config
 
 SIGMA_N = 20e3
@@ -41,6 +50,42 @@ def test_peak_residual_and_dilation_of_a_known_curve():
     assert dilation_angle(x, y)["dilation_angle_deg"] == pytest.approx(np.degrees(np.arctan(0.2)))
     # a contracting sample: a negative angle
     assert dilation_angle(x, -0.1 * x)["dilation_angle_deg"] == pytest.approx(-np.degrees(np.arctan(0.1)))
+
+
+def test_failure_states_are_the_stresses_at_the_peak_and_over_the_residual_window():
+    # the lid's stress swings around 50 kPa; tau follows the known ratio of the curve above
+    x = np.linspace(0.0, 5e-3, 501)
+    ratio = np.where(x < 1e-3, 0.8 * x / 1e-3, 0.5 + 0.3 * np.exp(-(x - 1e-3) / 0.3e-3))
+    sigma_n = 50e3 * (1.0 + 0.05 * np.sin(x / 1e-4))
+    tau = ratio * sigma_n
+    p = peak_stresses(ratio, sigma_n, tau)
+    at = np.argmin(np.abs(x - 1e-3))
+    assert p == {"sigma_n_peak_Pa": pytest.approx(sigma_n[at]), "tau_peak_Pa": pytest.approx(0.8 * sigma_n[at])}
+    r = residual_stresses(x, ratio, sigma_n, tau)
+    last = x >= 4e-3 - 1e-15
+    assert r["sigma_n_residual_Pa"] == pytest.approx(sigma_n[last].mean())
+    assert r["tau_residual_Pa"] == pytest.approx(0.5 * sigma_n[last].mean(), rel=1e-4)
+
+
+def test_coulomb_fit_recovers_a_known_line_and_refuses_what_has_none():
+    sigma = np.array([25e3, 50e3, 100e3])
+    fit = coulomb_fit(sigma, 3e3 + sigma * np.tan(np.radians(35.0)))
+    assert fit["phi_deg"] == pytest.approx(35.0) and fit["cohesion_Pa"] == pytest.approx(3e3)
+    assert fit["r2"] == pytest.approx(1.0) and fit["n"] == 3
+    # scattered states: the least-squares line (numpy's polyfit as the reference)
+    tau = np.array([20e3, 41e3, 79e3])
+    slope, intercept = np.polyfit(sigma, tau, 1)
+    fit = coulomb_fit(sigma, tau)
+    assert np.tan(np.radians(fit["phi_deg"])) == pytest.approx(slope) and fit["cohesion_Pa"] == pytest.approx(intercept)
+    assert 0.99 < fit["r2"] < 1.0
+    one = coulomb_fit([50e3], [40e3])  # one test: its cohesionless angle
+    assert one["phi_deg"] == pytest.approx(np.degrees(np.arctan(0.8))) and one["cohesion_Pa"] == 0.0
+    with pytest.raises(ValueError, match="same normal stress"):
+        coulomb_fit([50e3, 50e3], [30e3, 40e3])
+    with pytest.raises(ValueError, match="falls with sigma_n"):
+        coulomb_fit([25e3, 50e3], [30e3, 20e3])
+    with pytest.raises(ValueError, match="finite and positive"):
+        coulomb_fit([25e3, np.nan], [30e3, 20e3])
 
 
 def test_measures_refuse_runs_too_short_and_figures_say_why():
@@ -101,8 +146,10 @@ def test_the_box_is_in_balance_along_the_shear(run):
 def test_summary_and_figure(run):
     out, _, _ = run
     on_disk = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
-    for key in ("phi_peak_deg", "phi_residual_deg", "dilation_angle_deg", "max_inertia_number"):
+    for key in ("phi_peak_deg", "phi_residual_deg", "dilation_angle_deg", "max_inertia_number", "sigma_n_peak_Pa",
+                "tau_peak_Pa", "sigma_n_residual_Pa", "tau_residual_Pa"):  # fmt: skip
         assert isinstance(on_disk[key], float), key
+    assert on_disk["tau_peak_Pa"] / on_disk["sigma_n_peak_Pa"] == pytest.approx(on_disk["ratio_peak"])
     assert (out / "shear.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

@@ -1,6 +1,7 @@
 """A triaxial sweep over the confining stress gives Mohr-Coulomb envelopes (docs/triaxial.md):
 one per setting of the other swept keys and per seed, in sweep.csv (with mean and spread over the
-seeds) and drawn in envelope.png; a sweep that does not vary the confining stress has none."""
+seeds) and drawn in envelope.png; a sweep that does not vary the confining stress has none. A
+direct shear sweep over the normal stress gives Coulomb lines the same way (docs/direct-shear.md)."""
 
 import csv
 import math
@@ -92,3 +93,27 @@ def test_tests_failing_at_one_mean_stress_give_an_error_not_an_envelope(tmp_path
     note = add_envelopes(cases, results, tmp_path / "envelope.png")
     assert "same mean stress" in results[0]["envelope_peak_error"]
     assert note.startswith("no envelope")
+
+
+def test_a_direct_shear_sweep_over_the_normal_stress_gives_coulomb_lines(tmp_path):
+    # (seed) -> (cohesion Pa, peak angle, residual angle) the synthetic boxes fail on
+    lines = {1: (2e3, 45.0, 38.0), 2: (0.0, 47.0, 37.0)}
+    cases, results = [], []
+    for seed, (c, phi_peak, phi_res) in lines.items():
+        for stress in STRESSES:
+            cases.append(Case(f"case_{len(cases):03d}", {"normal.stress": stress, "seed": seed},
+                              {"scenario": "direct_shear"}))  # fmt: skip
+            # the lid's measured stress is not the target: the fit uses what was measured
+            s_peak, s_res = 1.02 * stress, 0.99 * stress
+            results.append({"status": "ok", "sigma_n_peak_Pa": s_peak,
+                            "tau_peak_Pa": c + s_peak * math.tan(math.radians(phi_peak)),
+                            "sigma_n_residual_Pa": s_res, "tau_residual_Pa": s_res * math.tan(math.radians(phi_res))})
+    note = add_envelopes(cases, results, tmp_path / "envelope.png")
+    assert "normal.stress" in note
+    for case, result in zip(cases, results):
+        c, phi_peak, phi_res = lines[case.params["seed"]]
+        assert result["envelope_phi_peak_deg"] == pytest.approx(phi_peak)
+        assert result["envelope_cohesion_peak_Pa"] == pytest.approx(c, abs=1e-6)
+        assert result["envelope_phi_residual_deg"] == pytest.approx(phi_res)
+        assert result["envelope_tests_residual"] == 3
+    assert (tmp_path / "envelope.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -8,7 +8,8 @@
                                          run one case per parameter set in parallel on Dask
                                          (a local cluster, or --scheduler ADDRESS); writes
                                          DIR/case_*/, DIR/sweep.csv and DIR/sweep.png (and a
-                                         triaxial sweep over consolidation.stress: envelope.png)
+                                         triaxial sweep over consolidation.stress, a direct shear
+                                         sweep over normal.stress: envelope.png)
 
 Exit status: 0 done, 2 bad config (one line naming the key), 1 the run failed (the message
 names the cause; results written so far stay in DIR). A sweep exits 0 when some cases failed

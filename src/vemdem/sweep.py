@@ -455,7 +455,7 @@ def write_table(path: Path, cases: list[Case], results: list[dict]) -> None:
 
 
 def envelope_of(cases: list[Case]) -> dict | None:
-    """The scenario's ENVELOPE (scenarios.triaxial), None for a scenario without one."""
+    """The scenario's ENVELOPE (scenarios.triaxial, scenarios.direct_shear), None for a scenario without one."""
     if not cases or not isinstance(cases[0].raw.get("scenario"), str):
         return None
     return getattr(scenario_module(cases[0].raw["scenario"]), "ENVELOPE", None)
@@ -463,7 +463,7 @@ def envelope_of(cases: list[Case]) -> dict | None:
 
 def envelope_groups(cases: list[Case], results: list[dict]) -> tuple[str, dict[tuple, list[int]]] | None:
     """The cases whose failure states make one strength envelope: those of a sweep over the
-    scenario's ENVELOPE_KEY (a triaxial's confining stress) that share every other swept value,
+    scenario's ENVELOPE key (a triaxial's confining stress, a shear box's normal stress) that share every other swept value,
     the seed included (one envelope per seed: the spread over seeds is the envelopes'). None where
     the scenario has no envelope or the sweep does not vary its key."""
     envelope = envelope_of(cases)

@@ -12,7 +12,10 @@ the area correction the shrinking overlap of the halves would need.
   (phi_residual_deg), with the spread of the frames' angles there;
 - dilation angle: the largest slope of the lid's rise against the shear displacement, atan(dy/dx),
   a least-squares line over a moving window as for the triaxial's dilatancy; negative where the
-  sample only contracted.
+  sample only contracted;
+- failure states: sigma_n and tau at the peak row and their means over the residual window, the
+  points a sweep over the normal stress fits its Coulomb envelopes tau = c + sigma_n tan(phi)
+  through (least squares; one test: the cohesionless angle of its ratio).
 """
 
 from __future__ import annotations
@@ -48,16 +51,24 @@ def peak(x, ratio) -> dict:
             "shear_displacement_at_peak": float(x[i])}  # fmt: skip
 
 
-def residual(x, ratio, window: float = RESIDUAL_WINDOW) -> dict:
-    """The mean ratio over the last `window` share of the shear displacement; ValueError where
-    fewer than 3 rows lie there."""
+def residual_rows(x, ratio, window: float = RESIDUAL_WINDOW) -> np.ndarray:
+    """The rows with a finite ratio in the last `window` share of the shear displacement (a mask);
+    ValueError where fewer than 3 lie there."""
     x, ratio = np.asarray(x, float), np.asarray(ratio, float)
     span = x.max() - x.min() if len(x) else 0.0
     inside = (x >= x.max() - window * span - 1e-15) & np.isfinite(ratio) if len(x) else np.zeros(0, bool)
     n = int(inside.sum())
     if span <= 0 or n < 3:
         raise ValueError(f"{n} rows in the last {window:g} of the shear displacement; the residual state needs 3")
-    r = ratio[inside]
+    return inside
+
+
+def residual(x, ratio, window: float = RESIDUAL_WINDOW) -> dict:
+    """The mean ratio over the last `window` share of the shear displacement; ValueError where
+    fewer than 3 rows lie there."""
+    inside = residual_rows(x, ratio, window)
+    n = int(inside.sum())
+    r = np.asarray(ratio, float)[inside]
     return {"phi_residual_deg": float(_angle(np.mean(r))), "phi_residual_spread_deg": float(np.std(_angle(r))),
             "ratio_residual": float(np.mean(r)), "residual_rows": n}  # fmt: skip
 
@@ -79,6 +90,115 @@ def dilation_angle(x, y, rows: int = 4) -> dict:
     return {"dilation_angle_deg": float(_angle(max(slopes)))}
 
 
+def peak_stresses(ratio, sigma_n, tau) -> dict:
+    """sigma_n and tau at the peak row (sigma_n_peak_Pa, tau_peak_Pa): the peak failure state."""
+    ratio = np.asarray(ratio, float)
+    if not np.any(np.isfinite(ratio)):
+        raise ValueError("no row with a finite tau / sigma_n: no peak state")
+    i = int(np.nanargmax(ratio))
+    return {"sigma_n_peak_Pa": float(sigma_n[i]), "tau_peak_Pa": float(tau[i])}
+
+
+def residual_stresses(x, ratio, sigma_n, tau, window: float = RESIDUAL_WINDOW) -> dict:
+    """The means of sigma_n and tau over the residual window (sigma_n_residual_Pa,
+    tau_residual_Pa): the residual failure state."""
+    inside = residual_rows(x, ratio, window)
+    return {"sigma_n_residual_Pa": float(np.mean(np.asarray(sigma_n, float)[inside])),
+            "tau_residual_Pa": float(np.mean(np.asarray(tau, float)[inside]))}  # fmt: skip
+
+
+def coulomb_fit(sigma_n, tau) -> dict:
+    """The Coulomb line tau = c + sigma_n tan(phi) through one failure state per test, by least
+    squares: phi_deg, cohesion_Pa, r2, n. One test: the cohesionless angle of its ratio, c = 0,
+    r2 NaN. ValueError on stresses that are not finite (sigma_n not positive), on tests at one
+    normal stress, or on a line that falls with the normal stress."""
+    s, t = np.atleast_1d(np.asarray(sigma_n, dtype=float)), np.atleast_1d(np.asarray(tau, dtype=float))
+    if s.shape != t.shape or s.ndim != 1 or len(s) == 0:
+        raise ValueError(f"one tau per sigma_n needed, got {t.shape} and {s.shape}")
+    bad = np.flatnonzero(~np.isfinite(s) | (s <= 0) | ~np.isfinite(t))
+    if len(bad):
+        i = bad[0]
+        raise ValueError(f"sigma_n must be finite and positive, tau finite: test {i} has {s[i]!r}, {t[i]!r}")
+    if len(s) == 1:
+        return {"phi_deg": float(_angle(t[0] / s[0])), "cohesion_Pa": 0.0, "r2": float("nan"), "n": 1}
+    ds = s - s.mean()
+    if not np.any(ds):
+        raise ValueError("every test failed at the same normal stress: no envelope slope to fit")
+    slope = float(ds @ (t - t.mean()) / (ds @ ds))
+    if slope <= 0.0:
+        raise ValueError(f"tau falls with sigma_n (slope {slope:.4g}): no friction angle")
+    intercept = float(t.mean() - slope * s.mean())
+    residual_ = t - (intercept + slope * s)
+    total = float(np.sum((t - t.mean()) ** 2))
+    r2 = 1.0 - float(residual_ @ residual_) / total if total > 0 else float("nan")
+    return {"phi_deg": float(_angle(slope)), "cohesion_Pa": intercept, "r2": r2, "n": len(s)}
+
+
+# the failure states a sweep's envelopes go through: (name, summary key of sigma_n, of tau)
+FAILURE_STATES = (("peak", "sigma_n_peak_Pa", "tau_peak_Pa"), ("residual", "sigma_n_residual_Pa", "tau_residual_Pa"))
+
+
+def _states(summaries: list[dict], s_key: str, t_key: str) -> tuple[np.ndarray, np.ndarray]:
+    """The tests' stresses at one failure state, the tests that did not reach it left out."""
+    have = [s for s in summaries if isinstance(s.get(s_key), float) and isinstance(s.get(t_key), float)]
+    return np.array([s[s_key] for s in have]), np.array([s[t_key] for s in have])
+
+
+def envelopes(summaries: list[dict]) -> dict:
+    """The Coulomb envelopes through a set of direct shear tests' summaries (one per normal
+    stress), at the peak and at the residual state: envelope_phi_{peak,residual}_deg,
+    envelope_cohesion_{peak,residual}_Pa, envelope_r2_* and envelope_tests_*; an envelope that
+    cannot be fitted is reported as envelope_{peak,residual}_error."""
+    out: dict = {}
+    for name, s_key, t_key in FAILURE_STATES:
+        try:
+            fit = coulomb_fit(*_states(summaries, s_key, t_key))
+        except ValueError as error:
+            out[f"envelope_{name}_error"] = str(error)
+            continue
+        out.update({f"envelope_phi_{name}_deg": fit["phi_deg"], f"envelope_cohesion_{name}_Pa": fit["cohesion_Pa"],
+                    f"envelope_r2_{name}": fit["r2"], f"envelope_tests_{name}": fit["n"]})  # fmt: skip
+    return out
+
+
+def envelope_panel(title: str, summaries: list[dict], fit: dict) -> tuple:
+    """One panel of a sweep's envelope.png: (title, [(state, sigma_n, tau, phi_deg, cohesion_Pa)])
+    for the states that have an envelope."""
+    lines = []
+    for name, s_key, t_key in FAILURE_STATES:
+        if f"envelope_phi_{name}_deg" in fit:
+            s, t = _states(summaries, s_key, t_key)
+            lines.append((name, s, t, fit[f"envelope_phi_{name}_deg"], fit[f"envelope_cohesion_{name}_Pa"]))
+    return title, lines
+
+
+def plot_envelopes(panels: list[tuple], path: Path) -> None:
+    """envelope.png: per panel the tests' failure states (tau against sigma_n, kPa) and the
+    Coulomb lines through them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4.2), squeeze=False)
+    for ax, (title, lines) in zip(axes[0], panels):
+        top = max((float(np.max(s)) for _, s, _, _, _ in lines if len(s)), default=1.0) / 1e3
+        sigma = np.linspace(0.0, 1.1 * top, 50)
+        for k, (name, s, t, phi, c) in enumerate(lines):
+            marker, style = (("o", "--"), ("s", ":"))[k % 2]
+            ax.plot(s / 1e3, t / 1e3, marker, color=f"C{k}", label=f"{name} states")
+            ax.plot(sigma, c / 1e3 + sigma * np.tan(np.radians(phi)), style, color=f"C{k}", lw=1,
+                    label=f"{name}: phi = {phi:.1f} deg, c = {c / 1e3:.3g} kPa")  # fmt: skip
+        ax.set(xlabel="normal stress sigma_n (kPa)", ylabel="shear stress tau (kPa)", title=title)
+        ax.set_xlim(left=0.0)
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def shear_figures(rows: np.ndarray) -> dict:
     """summary.json's measures over the shear rows (module docstring), with displacements from the
     shear's start; a measure the run cannot give is its `*_error` string."""
@@ -94,6 +214,9 @@ def shear_figures(rows: np.ndarray) -> dict:
     for name, measure in (("peak", lambda: peak(x, ratio)), ("residual", lambda: residual(x, ratio)),
                           ("dilation", lambda: dilation_angle(x, y))):  # fmt: skip
         measured(out, name, measure)
+    sigma_n, tau = shear[:, HEADER.index("sigma_n")], shear[:, HEADER.index("tau")]
+    measured(out, "peak_state", lambda: peak_stresses(ratio, sigma_n, tau))
+    measured(out, "residual_state", lambda: residual_stresses(x, ratio, sigma_n, tau))
     out["max_inertia_number"] = largest_finite(shear[:, HEADER.index("inertia_number")])
     return out
 

@@ -26,7 +26,8 @@ sigma_n = the lid's force over the box's section, tau = the force the lower half
 sides) carries along x over the same section; the vertical displacement is the lid's rise.
 
 Outputs in DIR: shear.csv (one row per frame: analysis.direct_shear.HEADER), shear.png,
-summary.json (phi_peak_deg, phi_residual_deg, dilation_angle_deg, max_inertia_number, stages),
+summary.json (phi_peak_deg, phi_residual_deg, dilation_angle_deg, max_inertia_number, the peak
+and residual failure states, stages),
 fabric.csv and the scene outputs; `--resume` continues a run from inside either stage.
 """
 
@@ -37,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.direct_shear import HEADER, plot_shear, shear_figures
+from ..analysis.direct_shear import HEADER, envelope_panel, envelopes, plot_envelopes, plot_shear, shear_figures
 from ..analysis.microstructure import coordination
 from ..config import ConfigError, tables
 from ..config.build import activation_gap_from, scene_from, solver_options_from
@@ -53,6 +54,9 @@ from .pack import initial_state_from
 
 RESUMABLE = True
 SCHEMA = tables.DIRECT_SHEAR
+# A sweep over `key` gives Coulomb envelopes (sweep.add_envelopes): `fit` of a group's summaries,
+# `panel` and `plot` its figure
+ENVELOPE = {"key": "normal.stress", "fit": envelopes, "panel": envelope_panel, "plot": plot_envelopes}
 LOWER = ("floor", "lower -x", "lower +x", "lower -x plate")  # the walls that move with the lower half
 
 
