@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .envelope import failure_pairs, fit_envelopes
 from .triaxial import largest_finite, measured
 
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
@@ -138,27 +139,11 @@ def coulomb_fit(sigma_n, tau) -> dict:
 FAILURE_STATES = (("peak", "sigma_n_peak_Pa", "tau_peak_Pa"), ("residual", "sigma_n_residual_Pa", "tau_residual_Pa"))
 
 
-def _states(summaries: list[dict], s_key: str, t_key: str) -> tuple[np.ndarray, np.ndarray]:
-    """The tests' stresses at one failure state, the tests that did not reach it left out."""
-    have = [s for s in summaries if isinstance(s.get(s_key), float) and isinstance(s.get(t_key), float)]
-    return np.array([s[s_key] for s in have]), np.array([s[t_key] for s in have])
-
-
 def envelopes(summaries: list[dict]) -> dict:
     """The Coulomb envelopes through a set of direct shear tests' summaries (one per normal
-    stress), at the peak and at the residual state: envelope_phi_{peak,residual}_deg,
-    envelope_cohesion_{peak,residual}_Pa, envelope_r2_* and envelope_tests_*; an envelope that
-    cannot be fitted is reported as envelope_{peak,residual}_error."""
-    out: dict = {}
-    for name, s_key, t_key in FAILURE_STATES:
-        try:
-            fit = coulomb_fit(*_states(summaries, s_key, t_key))
-        except ValueError as error:
-            out[f"envelope_{name}_error"] = str(error)
-            continue
-        out.update({f"envelope_phi_{name}_deg": fit["phi_deg"], f"envelope_cohesion_{name}_Pa": fit["cohesion_Pa"],
-                    f"envelope_r2_{name}": fit["r2"], f"envelope_tests_{name}": fit["n"]})  # fmt: skip
-    return out
+    stress), at the peak and at the residual state (analysis.envelope.fit_envelopes: keys
+    envelope_*_{peak,residual})."""
+    return fit_envelopes(summaries, FAILURE_STATES, coulomb_fit)
 
 
 def envelope_panel(title: str, summaries: list[dict], fit: dict) -> tuple:
@@ -167,7 +152,7 @@ def envelope_panel(title: str, summaries: list[dict], fit: dict) -> tuple:
     lines = []
     for name, s_key, t_key in FAILURE_STATES:
         if f"envelope_phi_{name}_deg" in fit:
-            s, t = _states(summaries, s_key, t_key)
+            s, t = failure_pairs(summaries, s_key, t_key)
             lines.append((name, s, t, fit[f"envelope_phi_{name}_deg"], fit[f"envelope_cohesion_{name}_Pa"]))
     return title, lines
 

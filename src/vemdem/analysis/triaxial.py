@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .envelope import fit_envelopes
+
 HEADER = ("time", "stage", "axial_strain", "volumetric_strain", "sigma_1", "sigma_3", "q", "p", "void_ratio",
           "coordination", "fabric_anisotropy", "inertia_number", "sigma_1_contacts", "sigma_3_contacts", "unbalanced")  # fmt: skip
 CONSOLIDATION, SHEAR = 0, 1  # the `stage` column's values
@@ -301,28 +303,11 @@ def plot_triaxial(rows: np.ndarray, path: Path, title: str, marks: dict | None =
 FAILURE_STATES = (("peak", "sigma_3_peak_Pa", "sigma_1_peak_Pa"), ("cs", "sigma_3_cs_Pa", "sigma_1_cs_Pa"))
 
 
-def _failure_stresses(summaries: list[dict], s3_key: str, s1_key: str) -> tuple[np.ndarray, np.ndarray]:
-    """The tests' principal stresses at one failure state, the tests that did not reach it left out."""
-    have = [s for s in summaries if isinstance(s.get(s3_key), float) and isinstance(s.get(s1_key), float)]
-    return np.array([s[s3_key] for s in have]), np.array([s[s1_key] for s in have])
-
-
 def envelopes(summaries: list[dict]) -> dict:
     """The Mohr-Coulomb envelopes through a set of triaxial tests' summaries (one per confining
-    stress), at the peak and at the critical state: envelope_phi_{peak,cs}_deg,
-    envelope_cohesion_{peak,cs}_Pa, envelope_r2_{peak,cs} and envelope_tests_{peak,cs}; an
-    envelope that cannot be fitted is reported as envelope_{peak,cs}_error."""
-    out: dict = {}
-    for name, s3_key, s1_key in FAILURE_STATES:
-        s3, s1 = _failure_stresses(summaries, s3_key, s1_key)
-        try:
-            fit = mohr_coulomb_fit(s3, s1)
-        except ValueError as error:
-            out[f"envelope_{name}_error"] = str(error)
-            continue
-        out.update({f"envelope_phi_{name}_deg": fit["phi_deg"], f"envelope_cohesion_{name}_Pa": fit["cohesion_Pa"],
-                    f"envelope_r2_{name}": fit["r2"], f"envelope_tests_{name}": fit["n"]})  # fmt: skip
-    return out
+    stress), at the peak and at the critical state (analysis.envelope.fit_envelopes: keys
+    envelope_*_{peak,cs})."""
+    return fit_envelopes(summaries, FAILURE_STATES, mohr_coulomb_fit)
 
 
 def _draw_envelope(ax, sigma_3, sigma_1, fit: dict, title: str, cs_fit: dict | None = None) -> None:
