@@ -43,18 +43,19 @@ def series(path: Path = HERE / "triaxial_friction.csv") -> dict[tuple[str, str, 
 
 def main(out: Path) -> None:
     data = series()
-    fig, ax = plt.subplots(figsize=(7.0, 4.6))
-    ax.axhspan(*SANDS_CS_DEG, color="0.85", label="sands, critical state")
+    fig, (peak, cs) = plt.subplots(1, 2, figsize=(11.0, 4.6), sharey=True)
+    sands = cs.axhspan(*SANDS_CS_DEG, color="0.85", label="sands (Bolton 1986)")
     for i, ((grains, shape, scaling), s) in enumerate(data.items()):
-        colour, name = f"C{i}", f"{grains}, {shape}, s = {scaling:g}"
-        ax.plot(s["mu"], s["phi_peak_deg"], "o-", color=colour, label=f"{name}: peak")
-        ax.errorbar(s["mu"], s["phi_cs_deg"], yerr=s["phi_cs_spread_deg"], fmt="s--", color=colour, capsize=3,
-                    label=f"{name}: critical state")  # fmt: skip
-    ax.set(xlabel="interparticle friction mu", ylabel="friction angle (deg)",
-           title="drained triaxial, 100 grains, dense, 50 kPa")
-    ax.set_ylim(15, 60)  # fmt: skip
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+        style = dict(color=f"C{i}", label=f"{grains}, {shape}, s = {scaling:g}")
+        peak.plot(s["mu"], s["phi_peak_deg"], "o-", **style)
+        cs.errorbar(s["mu"], s["phi_cs_deg"], yerr=s["phi_cs_spread_deg"], fmt="s--", capsize=3, **style)
+    peak.set(xlabel="interparticle friction mu", ylabel="friction angle (deg)", title="peak", ylim=(15, 60))
+    cs.set(xlabel="interparticle friction mu", title="critical state (spread over the last 5 % of strain)")
+    for ax in (peak, cs):
+        ax.grid(alpha=0.3)
+    peak.legend(fontsize=8, loc="lower right")
+    cs.legend(handles=[sands], fontsize=8, loc="upper left")  # the series' colours: the peak panel's
+    fig.suptitle("drained triaxial, 100 grains, dense, 50 kPa")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     print(f"wrote {out}")
