@@ -5,7 +5,8 @@ settled pack, the same contact law and solver.
     python benchmarks/bench_oedometer.py                          # the `oedometer` example's pack
     python benchmarks/bench_oedometer.py --config job.toml --low 25e3 --high 250e3
 
-Both runs start from the config's pack (settled into --out/pack first, or its `initial_state`).
+Both runs start from the config's pack (settled into --out/pack first, or its `initial_state`), under
+the oedometer's law for the decade (set for --high unless the config gives `reference_force`).
 Stress-controlled: the config's servo with two stages, --low then --high; the decade is the second
 stage (from the first target, reached at rest, to the second, reached at rest). Displacement-
 controlled: the lid at a constant speed, the servo's speed cap at --high (the fastest the
@@ -17,7 +18,6 @@ Printed per run: steps (rejected), Newton iterations, simulated and wall time, p
 from __future__ import annotations
 
 import argparse
-import copy
 import sys
 import time
 import tomllib
@@ -30,7 +30,7 @@ from vemdem.driver.loop import simulate
 from vemdem.driver.stages import LoadPath, Stage
 from vemdem.model.servo import Servo
 from vemdem.scenarios.identity import run_identity
-from vemdem.scenarios.oedometer import SCHEMA, Oedometer, stages_from
+from vemdem.scenarios.oedometer import SCHEMA, Oedometer, pack_config_for, stages_from, with_test_law
 from vemdem.scenarios.pack import initial_state_from
 from vemdem.scenarios.registry import checked_config, example_text
 from vemdem.solver.api import make_integrator
@@ -61,7 +61,7 @@ class Counter:
 
 
 def _setup(cfg: dict, out: Path):
-    initial, _ = initial_state_from(cfg, None, out, None)
+    initial, _ = initial_state_from(cfg, None, out, None, pack_cfg=pack_config_for(cfg))
     test = Oedometer(cfg, initial)
     scene = scene_from(initial.grains, cfg, test.walls)
     test.bind(scene, out)
@@ -69,9 +69,6 @@ def _setup(cfg: dict, out: Path):
 
 
 def stress_controlled(cfg: dict, out: Path, low: float, high: float, max_time: float) -> dict:
-    cfg = copy.deepcopy(cfg)
-    cfg["stages"] = [{"stress": low, "max_time": max_time, "max_strain": 0.6},
-                     {"stress": high, "max_time": max_time, "max_strain": 0.6}]  # fmt: skip
     initial, test, scene = _setup(cfg, out)
     integrator = make_integrator(solver_options_from(cfg), scene)
     stages = stages_from(cfg, scene.material.density, test.height0, test.grain_size)
@@ -125,6 +122,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     raw = tomllib.loads(Path(args.config).read_text() if args.config else example_text("oedometer"))
     cfg, _ = checked_config(raw)
+    # both runs under the oedometer's own law for this decade (set for its largest stress) and
+    # from the pack it settles under that law, as `vemdem run` would
+    cfg["stages"] = [{"stress": args.low, "max_time": args.max_time, "max_strain": 0.6},
+                     {"stress": args.high, "max_time": args.max_time, "max_strain": 0.6}]  # fmt: skip
+    cfg = with_test_law(cfg)
     out = Path(args.out)
     decades = np.log10(args.high / args.low)
     print(f"{args.low:g} -> {args.high:g} Pa ({decades:.2f} decades)", flush=True)
