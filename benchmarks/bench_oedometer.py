@@ -68,7 +68,8 @@ def _setup(cfg: dict, out: Path):
     return initial, test, scene
 
 
-def stress_controlled(cfg: dict, out: Path, low: float, high: float, max_time: float) -> dict:
+def stress_controlled(cfg: dict, out: Path, max_time: float) -> dict:
+    """The servo along the config's two stages (main sets them: --low, then --high)."""
     initial, test, scene = _setup(cfg, out)
     integrator = make_integrator(solver_options_from(cfg), scene)
     stages = stages_from(cfg, scene.material.density, test.height0, test.grain_size)
@@ -130,7 +131,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     decades = np.log10(args.high / args.low)
     print(f"{args.low:g} -> {args.high:g} Pa ({decades:.2f} decades)", flush=True)
-    runs = {"stress": stress_controlled(cfg, out, args.low, args.high, args.max_time),
+    runs = {"stress": stress_controlled(cfg, out, args.max_time),
             "displacement": displacement_controlled(cfg, out, args.low, args.high, args.max_time)}  # fmt: skip
     print(f"{'control':<14}{'steps/decade':>14}{'Newton/decade':>15}{'sim s/decade':>14}{'wall s/decade':>15}  end")
     for name, r in runs.items():

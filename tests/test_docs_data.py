@@ -172,13 +172,18 @@ def test_the_triaxial_peak_angle_rises_with_friction_then_saturates(tmp_path):
     lo, hi = module.SANDS_CS_DEG
     assert cs[0] < lo and all(lo <= c <= hi for c in cs[1:3])
     assert np.all(peak > cs)
-    # every series: the critical state below the sands' range at mu 0.1, within it from mu 0.3 on
-    # within its spread over the last 5 % (sand at the real density, mu 0.9: a collapse in its
-    # window; flexible angular grains at mu 0.5 and 0.9 read 39 deg with spreads of 3.5-7 deg)
+    # every series: the critical state stands in the sands' range from mu 0.3 on, below it at 0.1
+    # (sand at the real density, mu 0.9: a collapse in its window; flexible angular grains at mu
+    # 0.5 and 0.9: 39 deg, in the range within their spreads of 3.5-7 deg, docs/triaxial.md)
+    wide = {("rigid", "sand", 1.0): slice(3, 4), ("flexible", "angular", 100.0): slice(2, 4)}
     for key, series in module.series().items():
         cs, spread = series["phi_cs_deg"], series["phi_cs_spread_deg"]
-        assert cs[0] < lo, key
-        assert np.all((cs[1:] - spread[1:] <= hi) & (cs[1:] + spread[1:] >= lo)), key
+        within_spread = np.zeros(len(cs), dtype=bool)
+        within_spread[wide.get(key, slice(0, 0))] = True
+        strict = (np.arange(len(cs)) >= 1) & ~within_spread
+        assert cs[0] < lo and np.all((cs[strict] >= lo) & (cs[strict] <= hi)), key
+        near, by = cs[within_spread], spread[within_spread]
+        assert np.all((near - by <= hi) & (near + by >= lo)), key
     out = tmp_path / "friction.png"
     module.main(out)
     assert out.stat().st_size > 20_000
