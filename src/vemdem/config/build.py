@@ -16,6 +16,7 @@ from ..geometry.polyhedron import GeometryError, Polyhedron
 from ..geometry.shapes import cube, l_prism, rotation_matrix, sand_grain, tetrahedron
 from ..io.surfaces import load_mesh_wall, load_surface
 from ..model.scene import Scene
+from ..model.selective import auto_selective_scaling
 from ..model.servo import Servo, ServoWalls
 from ..solver.api import SolverOptions
 from ..vem.element import VemOptions
@@ -190,9 +191,32 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scen
         raise ConfigError(f"contact: {exc}") from None
     scene = Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
                         vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
+    scale_deformation_modes(scene, cfg["solver"]["selective_mass_scaling"], cfg["solver"]["integrator"])
     if scaling > 1.0:
         warn_if_mass_scaling_shows(scene)
     return scene
+
+
+class SelectiveMassScalingNotice(UserWarning):
+    """The explicit step runs with selectively scaled grains: a model change, named in the log."""
+
+
+def scale_deformation_modes(scene: Scene, requested, integrator: str) -> None:
+    """[solver] selective_mass_scaling: "auto" (model.selective, recorded in the scene for
+    summary.json) or lambda; flexible grains on the explicit step only ("auto" is 0 elsewhere)."""
+    scene.selective_auto = None
+    if scene.bodies.kind != "flexible" or integrator != "explicit" or requested == 0:
+        return
+    lam = requested
+    if requested == "auto":
+        scene.selective_auto = auto_selective_scaling(scene)
+        lam = scene.selective_auto["lambda"]
+    scene.bodies.scale_deformation_inertia(lam)
+    how = f' ("auto": bound by the {scene.selective_auto["bound"]})' if requested == "auto" else ""
+    warnings.warn(SelectiveMassScalingNotice(
+        f"selective mass scaling lambda = {lam:.3g}{how}: the grains' deformation modes carry {1 + lam:.3g} times "
+        f"their inertia, translations and rotations their real one; their own step is now "
+        f"{float(scene.bodies.critical_steps().min()):.3g} s (docs/selective-mass-scaling.md)"), stacklevel=2)
 
 
 class MassScalingWarning(UserWarning):
@@ -208,7 +232,8 @@ NEUTRAL_RATIO = 0.25
 
 def warn_if_mass_scaling_shows(scene: Scene) -> None:
     """Warn in one line when the mass scaling makes collisions rebound more than real grains do."""
-    ratio = scene.vibration_contact_ratio()
+    # selective scaling's share left out: it leaves collisions as they are (docs/selective-mass-scaling.md)
+    ratio = scene.vibration_contact_ratio() / np.sqrt(1.0 + scene.selective_mass_scaling)
     if ratio > NEUTRAL_RATIO:
         neutral = scene.mass_scaling * (NEUTRAL_RATIO / ratio) ** 2
         warnings.warn(MassScalingWarning(

@@ -18,16 +18,17 @@ import sys
 from dataclasses import replace
 
 from . import tables
-from .schema import REQUIRED, Field, TableList
+from .schema import REQUIRED, AutoOrNumber, Field, TableList
 
 COMMAND = "python -m vemdem.config.reference > docs/reference/config.md"
 
-_TYPES = {float: "number", int: "integer", str: "string", bool: "boolean", list: "list"}
+_TYPES = {float: "number", int: "integer", str: "string", bool: "boolean", list: "list", AutoOrNumber: '"auto" or number'}
 
 # values a check is probed with, by the key's type: each problem a check names for one of them is a
 # bound it states (the checks return a message for a value they refuse, None otherwise)
 _PROBES = {
     float: [-1e300, -1e3, -1.5, -1.0, -0.5, 0.0, 1e-300, 1e-6, 0.5, 1.0, 1.5, 60.0, 90.0, 1e3, 1e300],
+    AutoOrNumber: [-1.0, 0.0, 1e300],
     int: [-(10**12), -1, 0, 1, 2, 3, 4, 8, 10**3, 10**12],
     str: ["", "x"],
     list: [[], ["x"], [["x"]], [0.0, 0.0], [[0.0, 0.0, 0.0], [1.0]], [float("nan")] * 3, [1e300, 0.0, 0.0],

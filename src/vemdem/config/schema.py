@@ -30,6 +30,10 @@ class Field:
     doc: str = ""
 
 
+class AutoOrNumber:
+    """The kind of a key that takes "auto" (the package chooses, and records its choice) or a number."""
+
+
 @dataclass(frozen=True)
 class TableList:
     """An array of tables (`[[grains]]`), each checked against `schema`."""
@@ -87,6 +91,8 @@ def vectors3(v):
 def _type_name(kind) -> str:
     if isinstance(kind, tuple):
         return "one of " + ", ".join(repr(k) for k in kind)
+    if kind is AutoOrNumber:
+        return '"auto" or a number'
     return {float: "a number", int: "an integer", str: "a string", bool: "true or false", list: "a list"}[kind]
 
 
@@ -95,6 +101,12 @@ def _coerce(key: str, value, kind):
         if value not in kind:
             raise ConfigError(f"{key}: {value!r} is not {_type_name(kind)}")
         return value
+    if kind is AutoOrNumber:
+        if value == "auto":
+            return value
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool)):
+            raise ConfigError(f"{key}: expected {_type_name(kind)}, got {value!r}")
+        kind = float
     ok = {
         float: isinstance(value, (int, float)) and not isinstance(value, bool),
         int: isinstance(value, int) and not isinstance(value, bool),

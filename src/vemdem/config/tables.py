@@ -13,6 +13,7 @@ from dataclasses import replace
 from ..geometry.submesh import METHODS
 from .schema import (
     REQUIRED,
+    AutoOrNumber,
     ConfigError,
     Field,
     TableList,
@@ -93,6 +94,9 @@ def _within(lo, hi, unit, lo_open=False):
 def _count(lo, hi):
     """Check: an integer count from lo to hi; more is a typo that would run out of memory or time."""
     return lambda v: None if lo <= v <= hi else f"must be from {lo:,} to {hi:,}"
+
+
+_LAMBDA = _within(0.0, 1e12, "")
 
 
 def _vector_within(limit, unit):
@@ -320,6 +324,13 @@ SOLVER = {
     "mass_damping": Field(float, 0.0, _MASS_DAMPING, "Rayleigh mass-proportional damping alpha (1/s), for settling"),
     "mass_scaling": Field(
         float, 1.0, _within(1.0, 1e8, ""), "density factor for inertia, weight and contact scales (docs/dynamics.md)"
+    ),
+    "selective_mass_scaling": Field(
+        AutoOrNumber, 0.0, lambda v: None if v == "auto" else _LAMBDA(v),
+        "explicit, flexible grains: lambda, the grains' deformation modes carry 1 + lambda times their inertia while "
+        "translations and rotations keep their real one (0: off); \"auto\": the lambda at which the grains' own "
+        "step reaches the contacts', its slowest vibration period kept within a contact's duration "
+        "(docs/selective-mass-scaling.md)",
     ),
 }
 
@@ -665,6 +676,19 @@ DIRECT_SHEAR["contact"]["reference_force"] = replace(
 
 
 # -------------------------------------------------------------------------------- cross-field rules
+def _check_selective_scaling(cfg: dict) -> None:
+    """A number for selective mass scaling needs flexible grains on the explicit step ("auto" is 0
+    elsewhere: nothing to scale)."""
+    solver, model = cfg.get("solver"), cfg.get("model")
+    if not (isinstance(solver, dict) and isinstance(solver.get("selective_mass_scaling"), float)):
+        return
+    if solver["selective_mass_scaling"] > 0 and solver.get("integrator") != "explicit":
+        raise ConfigError("solver.selective_mass_scaling: scales the explicit step's mass; set solver.integrator = "
+                          '"explicit" (or "auto" or 0)')  # fmt: skip
+    if solver["selective_mass_scaling"] > 0 and isinstance(model, dict) and model.get("grains") == "rigid":
+        raise ConfigError('solver.selective_mass_scaling: rigid grains have no deformation modes to scale ("auto" or 0)')
+
+
 def check_rules(cfg: dict) -> None:
     """Rules that tie several keys together; each raises a ConfigError naming the key."""
     contact = cfg.get("contact")
@@ -686,6 +710,7 @@ def check_rules(cfg: dict) -> None:
             raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
         if solver["dt"] < solver["dt_min"]:
             raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    _check_selective_scaling(cfg)
     if isinstance(solver, dict) and "easy_iterations" in solver and "max_iterations" in solver:
         if solver["easy_iterations"] > solver["max_iterations"]:
             limit = solver["max_iterations"]

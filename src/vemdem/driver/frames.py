@@ -82,7 +82,7 @@ class FrameWriter:
 
     def write(self, state: State, strain: float, contact_result, wall_work: float = 0.0):
         s = self.scene
-        self.history.write(state.t, s.kinetic_energy(state.v, self.lumped), strain, s.gravity_energy(state.x, self.lumped),
+        self.history.write(state.t, s.kinetic_energy(state.v, self.lumped, state.x), strain, s.gravity_energy(state.x, self.lumped),
                            contact_result.energy, state.dissipated, contact_result.n_contacts, wall_work,
                            elastic_slip(state.history.gt))  # fmt: skip
         c = s.grain_centroids(state.x)

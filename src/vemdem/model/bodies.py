@@ -34,6 +34,7 @@ from ..vem.element import (
 )
 from ..vem.mass import GrainMass, build_mass
 from ..vem.material import Material
+from ..vem.selective_mass import deformation_kinetic_energy, rigid_point_mobility, selective_accelerations
 
 RIGID_MODES = 6  # a free grain's zero eigenvalues: three translations, three rotations
 
@@ -74,6 +75,9 @@ class BodyModel(Protocol):
 
     def vibration_periods(self) -> np.ndarray: ...
 
+    def accelerations(self, force: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """M^-1 f with the mass an explicit step integrates (the explicit integrators' mass operator)."""
+
 
 @dataclass
 class RotationReference:
@@ -108,6 +112,9 @@ class VemBodies:
         self.dof_ptr = 3 * el.vertex_ptr
         self.body_mass = material.density * el.volume
         self._spectrum = None  # per-grain eigenvalues at rest (critical_steps, vibration_periods)
+        # lambda of selective mass scaling: the deformation modes' inertia is (1 + lambda) times
+        # their real one (vem/selective_mass.py); 0: the lumped mass as it is
+        self.deformation_scaling = 0.0
 
     @property
     def n_bodies(self) -> int:
@@ -140,15 +147,53 @@ class VemBodies:
     def mass_matrix(self) -> sp.csr_matrix:
         return self.mass.matrix()
 
+    # ------------------------------------------------------------------ the explicit step's mass
+    def scale_deformation_inertia(self, lam: float) -> None:
+        """Selective mass scaling: the deformation modes carry (1 + lam) times their inertia in
+        the explicit step (`accelerations`), translations and rotations their real one."""
+        if not (np.isfinite(lam) and lam >= 0):
+            raise ValueError(f"selective mass scaling must be a finite number >= 0, got {lam!r}")
+        self.deformation_scaling = float(lam)
+
+    def accelerations(self, force: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """M_s^-1 f: the lumped masses' accelerations, blended with each grain's rigid-body
+        acceleration when the deformation modes are scaled (vem/selective_mass.py)."""
+        if self.deformation_scaling == 0.0:
+            return force / self.lumped[:, None]
+        return selective_accelerations(force, x, v, self.lumped, self.vertex_ptr, self.deformation_scaling)
+
+    def node_inverse_masses(self) -> np.ndarray:
+        """(N,) what a contact at a vertex sees of its grain's inertia along a unit force, at most:
+        1/m_i unscaled; (1/m_i + lambda mob_g) / (1 + lambda) with deformation scaling lambda,
+        mob_g the grain's rigid point mobility (vem.selective_mass.rigid_point_mobility)."""
+        lam = self.deformation_scaling
+        inverse = 1.0 / self.lumped
+        if lam == 0.0:
+            return inverse
+        mobility = np.repeat(self.rigid_mobility(), np.diff(self.vertex_ptr))
+        return (inverse + lam * mobility) / (1.0 + lam)
+
+    def rigid_mobility(self) -> np.ndarray:
+        """(G,) 1/M + rho^2 / I_min of every grain (vem.selective_mass.rigid_point_mobility)."""
+        return rigid_point_mobility(self.reference, self.lumped, self.vertex_ptr)
+
+    def deformation_kinetic_energy(self, x: np.ndarray, v: np.ndarray) -> float:
+        """1/2 sum m |v - v_rigid|^2 of all grains: the part of the kinetic energy that selective
+        mass scaling weighs by (1 + lambda)."""
+        return float(deformation_kinetic_energy(x, v, self.lumped, self.vertex_ptr))
+
     def critical_steps(self) -> np.ndarray:
         """2/omega_max of every grain: the largest eigenvalue of m^-1/2 K m^-1/2 at rest (K the
-        tangent block of the grain, m its lumped vertex masses)."""
-        return 2.0 / np.sqrt(self._spectra()[:, -1])
+        tangent block of the grain, m its lumped vertex masses), times sqrt(1 + lambda) with
+        selective mass scaling (exact: K's deformation modes are M-orthogonal to the rigid ones,
+        on which the scaled mass acts as (1 + lambda) M)."""
+        return 2.0 / np.sqrt(self._spectra()[:, -1]) * np.sqrt(1.0 + self.deformation_scaling)
 
     def vibration_periods(self) -> np.ndarray:
         """2 pi/omega_1 of every grain: its slowest elastic mode (the seventh eigenvalue, after
-        the six rigid-body modes), with the lumped masses. Mass scaling s lengthens it by sqrt(s)."""
-        return 2.0 * np.pi / np.sqrt(self._spectra()[:, RIGID_MODES])
+        the six rigid-body modes), with the lumped masses. Mass scaling s lengthens it by sqrt(s),
+        selective mass scaling lambda by sqrt(1 + lambda)."""
+        return 2.0 * np.pi / np.sqrt(self._spectra()[:, RIGID_MODES]) * np.sqrt(1.0 + self.deformation_scaling)
 
     def _spectra(self) -> np.ndarray:
         """The eigenvalues of m^-1/2 K m^-1/2 of every grain at rest, ascending, padded with the

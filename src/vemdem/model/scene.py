@@ -32,6 +32,7 @@ class Scene:
     contact: ContactModel
     gravity: np.ndarray
     mass_scaling: float = 1.0  # density factor applied to the material (recorded in every summary)
+    selective_auto: dict | None = None  # what chose selective mass scaling's lambda, where "auto" did (model.selective)
 
     @classmethod
     def build(cls, grains, material: Material, law: InterfaceLaw, friction: FrictionLaw = FrictionLaw(),
@@ -80,10 +81,23 @@ class Scene:
         """Nodal gravity load (N, 3) of the blended element (beta_e)."""
         return self.bodies.load[:, None] * self.gravity[None, :]
 
-    def kinetic_energy(self, v: np.ndarray, lumped: bool = False) -> float:
-        """1/2 v.M v with the consistent mass, or the lumped one (the explicit integrator's)."""
+    @property
+    def selective_mass_scaling(self) -> float:
+        """lambda: the grains' deformation modes carry (1 + lambda) times their inertia in the
+        explicit step (vem/selective_mass.py; 0 for rigid grains and unscaled ones)."""
+        return float(getattr(self.bodies, "deformation_scaling", 0.0))
+
+    def kinetic_energy(self, v: np.ndarray, lumped: bool = False, x: np.ndarray | None = None) -> float:
+        """1/2 v.M v with the consistent mass, or the lumped one (the explicit integrator's). With
+        the positions x and selective mass scaling lambda, the lumped one is the scaled mass's,
+        1/2 v.M_s v: the deformation modes' part counts (1 + lambda) times (the energy the explicit
+        step keeps; without x, the grains' real kinetic energy, as rest criteria measure it)."""
         if lumped:
-            return 0.5 * float(np.sum(self.bodies.lumped[:, None] * v * v))
+            real = 0.5 * float(np.sum(self.bodies.lumped[:, None] * v * v))
+            lam = self.selective_mass_scaling
+            if lam and x is not None:
+                return real + lam * self.bodies.deformation_kinetic_energy(x, v)
+            return real
         vf = v.ravel()
         return 0.5 * float(vf @ (self.mass_matrix() @ vf))
 

@@ -203,6 +203,7 @@ def make_integrator(options: SolverOptions, scene: Scene) -> Integrator:
     return ImplicitNewmark(scene, options)
 
 
-def kinetic_energy(scene: Scene, integrator: Integrator, v: np.ndarray) -> float:
-    """The grains' kinetic energy with the integrator's own mass (lumped for the explicit one)."""
-    return scene.kinetic_energy(v, integrator.lumped)
+def kinetic_energy(scene: Scene, integrator: Integrator, v: np.ndarray, x: np.ndarray | None = None) -> float:
+    """The grains' kinetic energy with the integrator's own mass (lumped for the explicit one;
+    with x, selectively scaled where the grains are: Scene.kinetic_energy)."""
+    return scene.kinetic_energy(v, integrator.lumped, x)

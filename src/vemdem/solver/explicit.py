@@ -67,13 +67,18 @@ class ExplicitIntegrator:
     def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters()):
         self.scene = scene
         self.params = params
-        self.grain_dt = float(scene.bodies.critical_steps().min())
-        self.inv_mass = 1.0 / scene.bodies.lumped[:, None]
-        self._lumped = scene.bodies.lumped[:, None]  # gravity on the lumped masses: free fall is exact
+        bodies = scene.bodies
+        # with selective mass scaling lambda the grains' own step is sqrt(1 + lambda) longer, and
+        # a contact meets their scaled deformation inertia too (bodies.node_inverse_masses)
+        self.grain_dt = float(bodies.critical_steps().min())
+        self.scaling = getattr(bodies, "deformation_scaling", 0.0)
+        self.mobility = bodies.rigid_mobility() if self.scaling else np.zeros(0)
+        self._lumped = bodies.lumped[:, None]  # gravity on the lumped masses: free fall is exact
         n_wall_nodes = len(scene.contact.wall_nodes(0.0))
-        self.inv_mass_all = np.concatenate([1.0 / scene.bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
+        self.inv_mass_all = np.concatenate([1.0 / bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
         self.skin = params.skin_gaps * scene.contact.law.activation_gap
-        self.entry_inverse_mass = 2.0 * float(np.max(1.0 / scene.bodies.lumped))
+        nodes = bodies.node_inverse_masses() if self.scaling else 1.0 / bodies.lumped
+        self.entry_inverse_mass = 2.0 * float(np.max(nodes))
         self._candidates = None
         # steps move grains a fraction of gbar: the narrow phase's feature pairs change little
         scene.contact.keep_feature_list(FEATURE_SKIN_GAPS * scene.contact.law.activation_gap)
@@ -112,7 +117,7 @@ class ExplicitIntegrator:
         scene = self.scene
         el = scene.bodies.evaluate(x)
         cr = scene.contact.evaluate(x, t, self.candidates(x, t), history, v=v)
-        acc = (self.f_grav - el.force - cr.force) * self.inv_mass - self.params.mass_damping * v
+        acc = scene.bodies.accelerations(self.f_grav - el.force - cr.force, x, v) - self.params.mass_damping * v
         if not np.all(np.isfinite(acc)):
             raise StepRejected("non-finite force")
         return acc, el.total_energy, cr
@@ -122,7 +127,8 @@ class ExplicitIntegrator:
         if len(ints):
             contact = self.scene.contact
             dt = min(dt, damped_contact_step(self.inv_mass_all, ints, floats, contact.law_params,
-                                             contact.masses_of_pairs(ints), contact.friction.damping_ratio))  # fmt: skip
+                                             contact.masses_of_pairs(ints), contact.friction.damping_ratio,
+                                             self.mobility, self.scaling))  # fmt: skip
         dt *= self.params.safety
         return min(dt, self.approach_limit(state, ints, floats))
 

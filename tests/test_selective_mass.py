@@ -1,0 +1,218 @@
+"""Selective mass scaling (vem/selective_mass.py, docs/selective-mass-scaling.md): the operator
+against the dense scaled mass matrix, the deformation periods against a generalised eigenproblem,
+the rigid motions' inertia kept, a spinning grain's stretch, collisions, and the config key."""
+
+import json
+import tomllib
+
+import numpy as np
+import pytest
+import scipy.linalg
+import tomli_w
+
+from vemdem.contact.defaults import default_contact_laws
+from vemdem.geometry import sand_grain
+from vemdem.model.scene import Scene
+from vemdem.scenarios.registry import example_text
+from vemdem.solver.api import SolverOptions, make_integrator
+from vemdem.solver.state import RunStats
+from vemdem.vem.element import evaluate
+from vemdem.vem.material import Material
+from vemdem.vem.selective_mass import rigid_point_mobility, selective_accelerations
+from vemdem.verification.impact import head_on
+
+
+def one_grain(E=90e9, density=2200.0, size=0.9e-3, n_vertices=20, seed=3):
+    material = Material(E, 0.16, density)
+    law, friction = default_contact_laws(size, E, density, 9.81)
+    return Scene.build([sand_grain(size, n_vertices, seed=seed)], material, law, friction, gravity=(0, 0, 0))
+
+
+def rigid_modes(x, m):
+    """(3n, 6) translations and rotations about the lumped-mass centroid, dof 3 v + k."""
+    r = x - m @ x / m.sum()
+    phi = np.zeros((3 * len(x), 6))
+    for k in range(3):
+        phi[k::3, k] = 1.0
+        e = np.zeros(3)
+        e[k] = 1.0
+        phi[:, 3 + k] = np.cross(e, r).ravel()
+    return phi
+
+
+def dense_scaled_mass(x, m, lam):
+    """M_s = M + lam (M - M Phi (Phi^T M Phi)^-1 Phi^T M), Olovsson et al. (2005)."""
+    M = np.diag(np.repeat(m, 3))
+    phi = rigid_modes(x, m)
+    return M + lam * (M - M @ phi @ np.linalg.solve(phi.T @ M @ phi, phi.T @ M))
+
+
+@pytest.fixture(scope="module")
+def grain():
+    return one_grain()
+
+
+def test_operator_is_the_inverse_of_the_dense_scaled_mass(grain, rng):
+    b = grain.bodies
+    x = b.reference + 1e-6 * rng.standard_normal(b.reference.shape)  # a deformed placement
+    f = rng.standard_normal(x.shape)
+    for lam in (0.0, 3.0, 1e4):
+        a = selective_accelerations(f, x, np.zeros_like(x), b.lumped, b.vertex_ptr, lam)
+        expected = np.linalg.solve(dense_scaled_mass(x, b.lumped, lam), f.ravel()).reshape(-1, 3)
+        assert np.allclose(a, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+def test_translations_and_rotations_keep_their_real_inertia(grain, rng):
+    """Net force and torque about the centroid give the real momenta' rates at every lambda, spinning or not."""
+    b = grain.bodies
+    x, m = b.reference, b.lumped
+    v = np.cross(rng.standard_normal(3), x - m @ x / m.sum()) + rng.standard_normal(3)
+    f = rng.standard_normal(x.shape)
+    c = m @ x / m.sum()
+    for lam in (10.0, 1e6):
+        a = selective_accelerations(f, x, v, m, b.vertex_ptr, lam)
+        assert np.allclose(m @ a, f.sum(axis=0), rtol=1e-9)
+        assert np.allclose(np.sum(m[:, None] * np.cross(x - c, a), axis=0), np.sum(np.cross(x - c, f), axis=0),
+                           rtol=1e-7, atol=1e-9 * np.abs(f).sum())  # fmt: skip
+
+
+def test_free_fall_and_rest_are_exact(grain):
+    b = grain.bodies
+    g = np.array([0.0, 0.0, -9.81])
+    b.scale_deformation_inertia(1e5)
+    try:
+        fall = b.accelerations(b.lumped[:, None] * g, b.reference, np.zeros_like(b.reference))
+        rest = b.accelerations(np.zeros_like(b.reference), b.reference, np.zeros_like(b.reference))
+    finally:
+        b.scale_deformation_inertia(0.0)
+    assert np.allclose(fall, g, rtol=1e-12, atol=1e-12)
+    assert not rest.any()  # a grain at rest without forces stays at rest, to the bit
+
+
+def test_deformation_periods_grow_by_the_square_root_of_one_plus_lambda(grain):
+    """The critical step and the slowest vibration period from the generalised eigenproblem K u =
+    w^2 M_s u (scipy), against the body model's closed form."""
+    b = grain.bodies
+    el = b.elements
+    K = evaluate(el, el.reference, force=False, tangent=True).blocks.reshape(3 * b.n_vertices, -1)
+    K = 0.5 * (K + K.T)
+    lam = 250.0
+    w2 = scipy.linalg.eigh(K, dense_scaled_mass(b.reference, b.lumped, lam), eigvals_only=True)
+    b.scale_deformation_inertia(lam)
+    try:
+        step, period = b.critical_steps()[0], b.vibration_periods()[0]
+    finally:
+        b.scale_deformation_inertia(0.0)
+    assert step == pytest.approx(2.0 / np.sqrt(w2[-1]), rel=1e-6)
+    assert period == pytest.approx(2.0 * np.pi / np.sqrt(w2[6]), rel=1e-6)
+    assert step == pytest.approx(np.sqrt(1 + lam) * b.critical_steps()[0], rel=1e-12)
+
+
+def test_rigid_point_mobility_bounds_every_vertex_direction(grain, rng):
+    """1/M + rho^2/I_min bounds n . (Phi (Phi^T M Phi)^-1 Phi^T)_ii n over vertices and directions."""
+    b = grain.bodies
+    phi = rigid_modes(b.reference, b.lumped)
+    P = phi @ np.linalg.solve(phi.T @ np.diag(np.repeat(b.lumped, 3)) @ phi, phi.T)
+    n = rng.standard_normal((200, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    worst = max(float(d @ P[3 * i:3 * i + 3, 3 * i:3 * i + 3] @ d) for i in range(b.n_vertices) for d in n)
+    bound = rigid_point_mobility(b.reference, b.lumped, b.vertex_ptr)[0]
+    assert worst <= bound * (1 + 1e-12)
+    assert worst > 0.5 * bound  # and not loose
+
+
+def spin(lam, omega=1000.0, duration=4e-3):
+    """A free soft grain spun about z from its unstretched shape: (largest strain over the run, its
+    angular momentum at the start and the end, the scaled energy at the start and the end)."""
+    scene = one_grain(E=1e6, density=2200.0)
+    b = scene.bodies
+    b.scale_deformation_inertia(lam)
+    c = b.lumped @ b.reference / b.lumped.sum()
+    v0 = np.cross([0.0, 0.0, omega], b.reference - c)
+    run = make_integrator(SolverOptions(integrator="explicit", dt_max=1e-5), scene)
+    state = run.initial_state(v0=v0)
+    strains, energies = [], []
+
+    def record(s, info, h):
+        strains.append(float(scene.grain_strains(s.x).max()))
+        energies.append(scene.kinetic_energy(s.v, True, s.x) + info.strain_energy)
+
+    momentum = [np.sum(b.lumped[:, None] * np.cross(state.x - c, state.v), axis=0)]
+    state, _ = run.advance(state, duration, record, RunStats())
+    c1 = b.lumped @ state.x / b.lumped.sum()
+    momentum.append(np.sum(b.lumped[:, None] * np.cross(state.x - c1, state.v), axis=0))
+    return max(strains), momentum, (scene.kinetic_energy(v0, True, b.reference), energies)
+
+
+def test_a_spinning_grain_stretches_as_a_real_one():
+    """The modes turn with the grain, so the centripetal force is not asked of the scaled
+    deformation inertia: fixed modes would stretch the grain (1 + lambda) times more."""
+    real, _, _ = spin(0.0)
+    scaled, momentum, (e0, energies) = spin(1e3)
+    assert scaled == pytest.approx(real, rel=0.05)  # 4.70e-4 and 4.77e-4; fixed modes: 0.37
+    # rho omega^2 R^2 / E, the order of a spinning ball's stretch: 4e-4 here
+    assert 1e-5 < real < 2e-3
+    assert np.allclose(momentum[1], momentum[0], rtol=1e-6)
+    assert max(energies) <= e0 * (1 + 1e-3)  # the scaled energy never grows
+
+
+def test_a_collision_keeps_its_restitution():
+    """Head-on impact at 90 GPa: lambda leaves the rebound alone, far past the uniform scaling that
+    changes it (test_mass_scaling.py), and no energy is gained."""
+    reference = head_on(1.0, selective_mass_scaling=1e3)
+    for lam in (1e5, 1e7):
+        impact = head_on(1.0, selective_mass_scaling=lam)
+        assert impact.restitution == pytest.approx(reference.restitution, rel=0.01)
+        assert 0.0 < impact.energy_kept < 1.0
+        assert impact.steps < reference.steps / 5  # what it is for
+
+
+def drop_config(tmp_path, **solver):
+    raw = tomllib.loads(example_text("drop"))
+    raw["duration"] = 2e-3
+    raw["output"] = {"every": 1e-3, "vtk": False}
+    raw["solver"] = {"integrator": "explicit", **solver}
+    config = tmp_path / "drop.toml"
+    config.write_text(tomli_w.dumps(raw))
+    return config
+
+
+def test_auto_is_named_in_the_log_and_the_summary(tmp_path, cli):
+    code, _, err = cli("run", drop_config(tmp_path, selective_mass_scaling="auto"), "--out", tmp_path / "out",
+                       "--quiet")  # fmt: skip
+    assert code == 0, err
+    (line,) = [line for line in err.splitlines() if "selective mass scaling" in line]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    lam = summary["selective_mass_scaling"]
+    auto = summary["selective_mass_scaling_auto"]
+    assert f"lambda = {lam:.3g}" in line and lam == auto["lambda"] > 1e3
+    assert lam == min(auto["lambda_contact"], auto["lambda_period_cap"])
+    # the scaled slowest period within the named share of a contact's duration
+    assert auto["scaled_period_s"] <= auto["period_fraction"] * auto["loading_time_s"] * (1 + 1e-9)
+    history = (tmp_path / "out" / "history.csv").read_text().splitlines()
+    assert len(history) >= 3  # frames written: the run went through
+
+
+@pytest.mark.parametrize(("solver", "cause"), [
+    ({"integrator": "implicit", "selective_mass_scaling": 10.0}, 'set solver.integrator = "explicit"'),
+    ({"selective_mass_scaling": -1.0}, "must be in [0, 1e12]"),
+    ({"selective_mass_scaling": "yes"}, 'expected "auto" or a number'),
+])  # fmt: skip
+def test_bad_values_are_refused_naming_the_key(tmp_path, cli, solver, cause):
+    config = drop_config(tmp_path, **solver)
+    code, _, err = cli("run", config, "--out", tmp_path / "out", "--quiet")
+    assert code == 2 and "solver.selective_mass_scaling" in err and cause in err, err
+
+
+def test_rigid_grains_take_auto_as_nothing_to_scale(tmp_path, cli):
+    config = drop_config(tmp_path, selective_mass_scaling="auto")
+    raw = tomllib.loads(config.read_text())
+    raw["model"] = {"grains": "rigid"}
+    config.write_text(tomli_w.dumps(raw))
+    code, _, err = cli("run", config, "--out", tmp_path / "out", "--quiet")
+    assert code == 0, err
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["selective_mass_scaling"] == 0.0
+    raw["solver"]["selective_mass_scaling"] = 5.0
+    config.write_text(tomli_w.dumps(raw))
+    code, _, err = cli("run", config, "--out", tmp_path / "out2", "--quiet")
+    assert code == 2 and "rigid grains have no deformation modes" in err
