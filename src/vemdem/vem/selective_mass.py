@@ -54,41 +54,56 @@ def _inverse_3x3(J: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-@njit(cache=True)
-def _grain_rigid_terms(f, x, v, m, lo, hi):
-    """(centroid, A, omega, alpha) of the vertices lo:hi: the rigid-body acceleration's parts."""
+def _grain_rigid_terms(f, x, v, m, lo, hi, out):
+    """The rigid-body acceleration's parts of the vertices lo:hi into out (4, 3): centroid, A,
+    omega, alpha. Written with scalars: small arrays made per vertex cost more than the sums."""
     mass = 0.0
-    c = np.zeros(3)
-    vc = np.zeros(3)
-    F = np.zeros(3)
+    c0 = c1 = c2 = u0 = u1 = u2 = F0 = F1 = F2 = 0.0
     for i in range(lo, hi):
-        mass += m[i]
-        for k in range(3):
-            c[k] += m[i] * x[i, k]
-            vc[k] += m[i] * v[i, k]
-            F[k] += f[i, k]
-    c /= mass
-    vc /= mass
+        mi = m[i]
+        mass += mi
+        c0 += mi * x[i, 0]
+        c1 += mi * x[i, 1]
+        c2 += mi * x[i, 2]
+        u0 += mi * v[i, 0]
+        u1 += mi * v[i, 1]
+        u2 += mi * v[i, 2]
+        F0 += f[i, 0]
+        F1 += f[i, 1]
+        F2 += f[i, 2]
+    c0, c1, c2, u0, u1, u2 = c0 / mass, c1 / mass, c2 / mass, u0 / mass, u1 / mass, u2 / mass
     T = np.zeros(3)
     L = np.zeros(3)
     J = np.zeros((3, 3))
     for i in range(lo, hi):
-        r = x[i] - c
-        T += _cross(r, f[i])
-        L += m[i] * _cross(r, v[i] - vc)
-        r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-        for a in range(3):
-            J[a, a] += m[i] * r2
-            for b in range(3):
-                J[a, b] -= m[i] * r[a] * r[b]
+        mi = m[i]
+        r0, r1, r2 = x[i, 0] - c0, x[i, 1] - c1, x[i, 2] - c2
+        w0, w1, w2 = v[i, 0] - u0, v[i, 1] - u1, v[i, 2] - u2
+        T[0] += r1 * f[i, 2] - r2 * f[i, 1]
+        T[1] += r2 * f[i, 0] - r0 * f[i, 2]
+        T[2] += r0 * f[i, 1] - r1 * f[i, 0]
+        L[0] += mi * (r1 * w2 - r2 * w1)
+        L[1] += mi * (r2 * w0 - r0 * w2)
+        L[2] += mi * (r0 * w1 - r1 * w0)
+        r2sum = r0 * r0 + r1 * r1 + r2 * r2
+        J[0, 0] += mi * (r2sum - r0 * r0)
+        J[1, 1] += mi * (r2sum - r1 * r1)
+        J[2, 2] += mi * (r2sum - r2 * r2)
+        J[0, 1] -= mi * r0 * r1
+        J[0, 2] -= mi * r0 * r2
+        J[1, 2] -= mi * r1 * r2
+    J[1, 0], J[2, 0], J[2, 1] = J[0, 1], J[0, 2], J[1, 2]
     Jinv = _inverse_3x3(J)
     omega = Jinv @ L
-    alpha = Jinv @ (T - _cross(omega, J @ omega))
-    return c, F / mass, omega, alpha
+    Jw = J @ omega
+    gyro = np.array([omega[1] * Jw[2] - omega[2] * Jw[1], omega[2] * Jw[0] - omega[0] * Jw[2],
+                     omega[0] * Jw[1] - omega[1] * Jw[0]])  # fmt: skip
+    alpha = Jinv @ (T - gyro)
+    out[0, 0], out[0, 1], out[0, 2] = c0, c1, c2
+    out[1, 0], out[1, 1], out[1, 2] = F0 / mass, F1 / mass, F2 / mass
+    out[2] = omega
+    out[3] = alpha
+    return u0, u1, u2
 
 
 @njit(parallel=True, cache=True)
@@ -98,14 +113,23 @@ def selective_accelerations(f: np.ndarray, x: np.ndarray, v: np.ndarray, m: np.n
     vertices' positions and velocities (the rigid motion's angular velocity), m (N,) the lumped
     masses, lam the deformation modes' added mass factor lambda >= 0."""
     a = np.empty_like(f)
+    share = lam / (1.0 + lam)
     for g in prange(len(vertex_ptr) - 1):
         lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
-        c, A, omega, alpha = _grain_rigid_terms(f, x, v, m, lo, hi)
+        t = np.empty((4, 3))
+        _grain_rigid_terms(f, x, v, m, lo, hi, t)
+        o0, o1, o2 = t[2, 0], t[2, 1], t[2, 2]
+        b0, b1, b2 = t[3, 0], t[3, 1], t[3, 2]
         for i in range(lo, hi):
-            r = x[i] - c
-            rigid = A + _cross(alpha, r) + _cross(omega, _cross(omega, r))
-            for k in range(3):
-                a[i, k] = (f[i, k] / m[i] + lam * rigid[k]) / (1.0 + lam)
+            r0, r1, r2 = x[i, 0] - t[0, 0], x[i, 1] - t[0, 1], x[i, 2] - t[0, 2]
+            s0, s1, s2 = o1 * r2 - o2 * r1, o2 * r0 - o0 * r2, o0 * r1 - o1 * r0  # omega x r
+            rigid0 = t[1, 0] + b1 * r2 - b2 * r1 + o1 * s2 - o2 * s1
+            rigid1 = t[1, 1] + b2 * r0 - b0 * r2 + o2 * s0 - o0 * s2
+            rigid2 = t[1, 2] + b0 * r1 - b1 * r0 + o0 * s1 - o1 * s0
+            inverse = 1.0 / ((1.0 + lam) * m[i])
+            a[i, 0] = f[i, 0] * inverse + share * rigid0
+            a[i, 1] = f[i, 1] * inverse + share * rigid1
+            a[i, 2] = f[i, 2] * inverse + share * rigid2
     return a
 
 
@@ -117,17 +141,16 @@ def deformation_kinetic_energy(x: np.ndarray, v: np.ndarray, m: np.ndarray, vert
     zero = np.zeros_like(v)
     for g in prange(len(vertex_ptr) - 1):
         lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
-        c, _, omega, _ = _grain_rigid_terms(zero, x, v, m, lo, hi)
-        mass = 0.0
-        vc = np.zeros(3)
-        for i in range(lo, hi):
-            mass += m[i]
-            vc += m[i] * v[i]
-        vc /= mass
+        t = np.empty((4, 3))
+        u0, u1, u2 = _grain_rigid_terms(zero, x, v, m, lo, hi, t)
+        o0, o1, o2 = t[2, 0], t[2, 1], t[2, 2]
         e = 0.0
         for i in range(lo, hi):
-            d = v[i] - vc - _cross(omega, x[i] - c)
-            e += m[i] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            r0, r1, r2 = x[i, 0] - t[0, 0], x[i, 1] - t[0, 1], x[i, 2] - t[0, 2]
+            d0 = v[i, 0] - u0 - (o1 * r2 - o2 * r1)
+            d1 = v[i, 1] - u1 - (o2 * r0 - o0 * r2)
+            d2 = v[i, 2] - u2 - (o0 * r1 - o1 * r0)
+            e += m[i] * (d0 * d0 + d1 * d1 + d2 * d2)
         total[g] = 0.5 * e
     return total.sum()
 
