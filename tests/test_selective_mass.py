@@ -191,6 +191,8 @@ def test_auto_is_named_in_the_log_and_the_summary(tmp_path, cli):
     assert auto["scaled_period_s"] <= auto["period_fraction"] * auto["loading_time_s"] * (1 + 1e-9)
     history = (tmp_path / "out" / "history.csv").read_text().splitlines()
     assert len(history) >= 3  # frames written: the run went through
+    # the books close with the scaled kinetic energy: what the step keeps
+    assert abs(summary["energy"]["balance_error"]) < 0.01, summary["energy"]
 
 
 @pytest.mark.parametrize(("solver", "cause"), [
