@@ -31,7 +31,6 @@ SHAPES = ("cube", "tetrahedron", "l-prism", "random", "file")
 INTEGRATORS = ("implicit", "explicit")
 LINEAR_SOLVERS = ("auto", "direct", "grain-block")
 PREDICTORS = ("rigid", "acceleration", "rest")
-BODY_MODELS = ("flexible",)
 MAX_FRAMES = 100_000  # more frames than this is a typo in output.every, not a wish
 
 

@@ -318,15 +318,6 @@ def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.n
     return damped_pair_step(pair_inverse_masses(inv_mass_all, ints, floats), floats, law_params, m_eq, zeta)
 
 
-def stiffest_pair_frequency(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params) -> float:
-    """omega of the stiffest active pair: omega^2 = k(g) sum_i w_i^2 / m_i (the pair's spring on the
-    lumped masses of its nodes; a wall node has 1/m = 0). 0 without pairs."""
-    if len(ints) == 0:
-        return 0.0
-    k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), law_params)
-    return float(np.sqrt(np.max(k * pair_inverse_masses(inv_mass_all, ints, floats))))
-
-
 def pair_gaps(floats: np.ndarray) -> np.ndarray:
     """The gap of every pair (the column layout stays inside contact/)."""
     return floats[:, GAP]
