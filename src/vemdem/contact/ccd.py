@@ -194,18 +194,6 @@ def accd_alpha(ints, x_all, n_vertices, plane_node0, dx, vertex_grain, c, t, phi
     return alpha_min
 
 
-@njit(cache=True)
-def _candidate_ratio(pairs, trans, spread, gbar):
-    """min over candidate surface pairs of gbar / approach (their distance when no feature pair is
-    active; when one is, _active_ratio is the sharper bound and is taken too)."""
-    ratio = np.inf
-    for k in range(len(pairs)):
-        move = _approach(trans, spread, pairs[k, 0], pairs[k, 1])
-        if move > 0.0:
-            ratio = min(ratio, gbar / move)
-    return ratio
-
-
 def _top2(values: np.ndarray) -> float:
     return float(np.sort(values)[-2:].sum()) if len(values) > 1 else 0.0
 
@@ -235,33 +223,6 @@ def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray,
     top2 = _top2(_reach(trans, spread))
     if top2 > 0:
         ratio = min(ratio, gbar / top2)
-    return ratio
-
-
-def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.ndarray, ints: np.ndarray,
-                            floats: np.ndarray, candidates: np.ndarray, gbar: float, margin: float,
-                            plane_distance: np.ndarray, nodes=_NO_NODES) -> float:  # fmt: skip
-    """free_distance_ratio with a bound per pair instead of one for the whole scene:
-    - feature pairs within the layer (ints): alpha approach < gap;
-    - candidate surface pairs of the step's search: at least gbar apart when not in ints;
-    - every other pair was at least gbar + margin apart at the start of the step (the search's
-      reach) and its surfaces have moved by `moved` since: alpha top2 < gbar + margin - top2(moved);
-    - planes (plane_distance, (G, n_planes) distance of each grain's lowest vertex over each
-      active plane): alpha (|trans_g| + spread_g) < that distance.
-    A grain falling fast no longer shortens the updates of every other pair (the global bound did)."""
-    ratio = _active_ratio(trans, spread, ints, floats, *nodes) if len(ints) else np.inf
-    pairs = np.ascontiguousarray(candidates, dtype=np.int64)
-    if len(pairs):
-        ratio = min(ratio, _candidate_ratio(pairs, trans, spread, gbar))
-    top2 = _top2(_reach(trans, spread))
-    if top2 > 0:
-        room = gbar + margin - _top2(moved)
-        ratio = min(ratio, max(room, 0.0) / top2)
-    if plane_distance.size:
-        d = (np.linalg.norm(trans, axis=1) + spread)[: len(plane_distance)]
-        moving = d > 0
-        if moving.any():
-            ratio = min(ratio, float(np.min(plane_distance[moving] / d[moving, None])))
     return ratio
 
 

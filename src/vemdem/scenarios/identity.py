@@ -21,5 +21,7 @@ def run_identity(cfg: dict, schema: dict | None = None, solver_at: str = "solver
         adjustable = dict.fromkeys(f"{solver_at}.{k}" for k in STEP_CONTROL)
     else:
         fields = schema.get("solver", {})
-        adjustable = {f"solver.{k}": fields[k].default for k in STEP_CONTROL if isinstance(fields.get(k), Field)}
+        # a key whose default is left to the integrator (max_iterations) reads "default" in the resume's record
+        adjustable = {f"solver.{k}": "default" if fields[k].default is None else fields[k].default
+                      for k in STEP_CONTROL if isinstance(fields.get(k), Field)}  # fmt: skip
     return RunIdentity(digest(picked), picked, legacy=digest(cfg), adjustable=adjustable)
