@@ -236,8 +236,7 @@ def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> in
     new = fresh[~np.isin(fresh[:, 0] * width + fresh[:, 1], candidates[:, 0] * width + candidates[:, 1])]
     if len(new) == 0:
         return 0
-    ints, _ = find_contacts(contact.all_positions(x, t), new, contact.topology, contact.law.activation_gap,
-                            ee_rule=contact.law.edge_edge_rule)  # fmt: skip
+    ints, _ = find_contacts(contact.all_positions(x, t), new, contact.topology, contact.law.activation_gap)
     return len(ints)
 
 
