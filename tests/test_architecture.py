@@ -35,6 +35,9 @@ FORBIDDEN = {
                "config.reference", "config.schema", "io"},
     "config.schema": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
     "config.tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.checks": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.lab_tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.rules": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
 }
 
 

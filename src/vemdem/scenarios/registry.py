@@ -6,7 +6,8 @@ from importlib import import_module
 from importlib.resources import files
 
 from ..config import ConfigError, apply_schema
-from ..config.tables import REMOVED, check_rules
+from ..config.rules import check_rules
+from ..config.tables import REMOVED
 
 SCENARIOS = {
     "grain_compression": "vemdem.scenarios.grain_compression",
