@@ -13,11 +13,11 @@ from typing import Protocol
 import numpy as np
 
 from ..model.scene import Scene
+from .defaults import NEWTON_ITERATIONS, RIGID_NEWTON_ITERATIONS, default
 from .explicit import (FEATURE_SKIN_GAPS, ExplicitIntegrator, ExplicitParameters, advance_explicit,
                        explicit_initial_state)
 from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
-from .defaults import NEWTON_ITERATIONS, RIGID_NEWTON_ITERATIONS, default
 from .newmark import NewmarkParameters, advance, initial_state
 from .rigid import RigidExplicit
 from .rigid_implicit import RigidNewmark
