@@ -2,7 +2,7 @@
 control's settings changed: which of them buys the jam's pace (docs/design-notes.md).
 
     python benchmarks/bench_jam.py [--state benchmarks/data/lid515_jam.npz] [--seconds 1200] [--steps N]
-                                   [--dt 1e-6] [--set solver.max_iterations=30] [--newton line_search=true]
+                                   [--dt 1e-6] [--set solver.max_iterations=30] [--newton stall_share=0.25]
                                    [--json PATH]
 
 The state is a lid run's (benchmarks/jam_state.py writes one; the shipped file is the 515-grain
@@ -10,7 +10,7 @@ lid cycle at the real density at 28.5 % strain), rebuilt with its lid on its way
 law and its friction history (bench_newton.state_case). The integrator is the one `vemdem run`
 makes from the `paper-compression-implicit` example's `[solver]` table, with `--set` changing a
 config value (as `vemdem sweep --set` spells it) and `--newton KEY=VALUE` a field of
-NewmarkParameters that no config key reaches (line_search, ccd, accuracy, predictor, ...). From
+NewmarkParameters that no config key reaches (stall_share, ccd_fraction, krylov_forcing, ...). From
 the state's positions, velocities and history (the acceleration solved afresh) it takes steps of
 `--dt` at first, the step control choosing the rest, until `--seconds` of wall time or `--steps`
 accepted steps, and prints: simulated time, its pace (simulated seconds per wall second), steps
@@ -117,7 +117,7 @@ def main(argv=None) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help=f"a config value of the {EXAMPLE} example (solver.max_iterations=30)")
     p.add_argument("--newton", action="append", default=[], metavar="KEY=VALUE",
-                   help="a NewmarkParameters field no config key reaches (line_search=true, ccd=pairwise)")
+                   help="a NewmarkParameters field no config key reaches (stall_share=0.25, ccd_fraction=0.5)")
     p.add_argument("--json", type=Path, help="also write the figures here")
     args = p.parse_args(argv)
     if not args.state.is_file():

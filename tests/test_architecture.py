@@ -15,7 +15,8 @@ ALLOWED = {
     "vem": {"geometry"},
     "contact": {"geometry"},
     "model": {"vem", "contact", "geometry"},
-    "solver": {"model", "contact"},
+    # config.tables: the [solver] keys' defaults, read by solver.defaults alone (test below)
+    "solver": {"model", "contact", "config.tables"},
     # analysis.microstructure: the frames' fabric.csv (plain arrays in, numbers out: it runs nothing)
     "driver": {"solver", "model", "io", "contact.model", "portable", "analysis.microstructure"},
     "io": {"geometry", "contact.walls"},
@@ -30,9 +31,13 @@ ALLOWED = {
 }
 # finer rules inside a room
 FORBIDDEN = {
-    "solver": {"vem", "contact.pairs", "contact.law", "contact.narrow", "scenarios", "driver", "config", "io"},
+    "solver": {"vem", "contact.pairs", "contact.law", "contact.narrow", "scenarios", "driver", "config.build",
+               "config.reference", "config.schema", "io"},
     "config.schema": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
     "config.tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.checks": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.lab_tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.rules": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
 }
 
 
@@ -113,14 +118,22 @@ def test_a_broken_rule_is_caught(tmp_path, monkeypatch, source, module, expected
     assert expected in _violations()
 
 
+def test_only_solver_defaults_reads_the_config_room():
+    """The integrators' parameter classes take the [solver] keys' defaults from the schema through
+    solver/defaults.py alone; config/tables.py imports nothing of the solver room (FORBIDDEN above),
+    so the two never import each other in a circle."""
+    readers = sorted(module for module, path, package in _modules() if module.startswith("solver.")
+                     and any(_matches(t, "config") for t in _imports(module, path, package)))  # fmt: skip
+    assert readers == ["solver.defaults"]
+
+
 def test_the_value_lists_config_tables_repeats_agree_with_their_owners():
     """config/tables.py may not import solver/ (FORBIDDEN above), so it repeats the names the solver
-    room owns: integrators, linear solvers, Newton predictors. A name added on one side only would
-    be refused by the config check or accepted there and refused by SolverOptions."""
+    room owns: integrators and linear solvers. A name added on one side only would be refused by
+    the config check or accepted there and refused by SolverOptions."""
     from vemdem.config import tables
-    from vemdem.solver import api, newmark
+    from vemdem.solver import api
     from vemdem.solver.linear import NAMES
 
     assert tables.INTEGRATORS == api.INTEGRATORS
     assert tables.LINEAR_SOLVERS == NAMES
-    assert tables.PREDICTORS == newmark.PREDICTORS

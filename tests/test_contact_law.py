@@ -113,21 +113,3 @@ def test_reference_force_is_the_force_at_the_switch_gap():
     assert k_switch == pytest.approx(2 * 100.0 / (law.activation_gap - law.switch_gap), rel=1e-12)  # n1 = 2
     assert fr.tangential_penalty == pytest.approx(k_switch, rel=1e-12)
     assert law.switch_force == pytest.approx(100.0, rel=1e-12)  # what summary.json reports
-
-
-@pytest.mark.parametrize("key", ["edge_fade", "edge_edge_rule"])
-def test_contact_switches_are_off_by_default_and_keys_turn_them_on(key):
-    """The contact model's two switches (docs/contact.md): off in the law and in a checked config,
-    on from the `[contact]` key, and the law built from it carries them."""
-    import tomllib
-
-    from vemdem.contact.defaults import default_contact_laws
-    from vemdem.scenarios.registry import checked_config, example_text
-
-    assert getattr(InterfaceLaw(1e-5, 1e9), key) is False
-    assert getattr(default_contact_laws(1e-3, 90e9, 2200.0)[0], key) is False
-    assert getattr(default_contact_laws(1e-3, 90e9, 2200.0, **{key: True})[0], key) is True
-    cfg = tomllib.loads(example_text("drop"))
-    assert checked_config(dict(cfg))[0]["contact"][key] is False
-    cfg.setdefault("contact", {})[key] = True
-    assert checked_config(cfg)[0]["contact"][key] is True

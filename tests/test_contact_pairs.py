@@ -1,7 +1,6 @@
 """Grain-grain contact pairs: the hierarchy on flat contacts, action = reaction,
 residual and tangent against finite differences of the potential, broad phase against brute force."""
 
-import itertools
 from collections import Counter, namedtuple
 
 import ipctk
@@ -26,10 +25,7 @@ from vemdem.contact.narrow import (
 from vemdem.contact.pairs import (
     C0,
     C1,
-    FEATURE_A,
-    FEATURE_B,
     GAP,
-    KIND,
     NODE0,
     _ee_gap,
     _ve_gap,
@@ -50,10 +46,10 @@ def scene(grains):
     return X, build_topology(X, [g.faces for g in grains], vptr)
 
 
-def pairs_of(grains, x=None, ee_rule=False):
+def pairs_of(grains, x=None):
     X, topo = scene(grains)
     x = X if x is None else x
-    ints, floats = find_contacts(x, candidate_pairs(x, topo.grain_vertex_ptr, GBAR), topo, GBAR, ee_rule=ee_rule)
+    ints, floats = find_contacts(x, candidate_pairs(x, topo.grain_vertex_ptr, GBAR), topo, GBAR)
     return Counter(PAIR_NAMES[k] for k in ints[:, 0]), ints, floats, topo
 
 
@@ -211,13 +207,13 @@ def test_a_cube_off_the_plank_axis_keeps_its_four_corner_pairs():
     np.testing.assert_allclose(floats[:, GAP], 0.01, rtol=1e-9)
 
 
-def _unculled_pairs(x, A, B, gbar, t, ee_rule=False):
+def _unculled_pairs(x, A, B, gbar, t):
     """grain_pair_contacts' loops over every feature pair of grains A and B, without its box and
     slab culling (the same gap kernels and hierarchy, in the same order): what the culling must
     leave unchanged. Returns (kind, grain A, grain B, feature A, feature B, gap) rows."""
     return _unculled(x, A, B, gbar, t.grain_vertex_ptr, t.grain_face_ptr, t.grain_edge_ptr,
                      _Topo(t.faces, t.edges, t.edge_faces, t.edge_type, t.vertex_face_ptr, t.vertex_faces,
-                           t.vertex_edge_ptr, t.vertex_edges), ee_rule)  # fmt: skip
+                           t.vertex_edge_ptr, t.vertex_edges))  # fmt: skip
 
 
 _Topo = namedtuple(
@@ -226,7 +222,7 @@ _Topo = namedtuple(
 
 
 @njit(cache=True)
-def _unculled(x, A, B, gbar, vptr, fptr, eptr, t, ee_rule):
+def _unculled(x, A, B, gbar, vptr, fptr, eptr, t):
     out = []
     for side in range(2):
         ga, gb = (A, B) if side == 0 else (B, A)
@@ -245,8 +241,7 @@ def _unculled(x, A, B, gbar, vptr, fptr, eptr, t, ee_rule):
         for p in range(vptr[ga], vptr[ga + 1]):
             for e in range(eptr[gb], eptr[gb + 1]):
                 d = _ve_gap(x, p, e, t.edges, gbar)[0]
-                if d >= 0.0 and _vertex_edge_survives(x, p, e, t.faces, t.edges, t.edge_faces, t.edge_type,
-                                                      t.vertex_edge_ptr, t.vertex_edges, gbar, ee_rule):
+                if d >= 0.0 and _vertex_edge_survives(x, p, e, t.faces, t.edge_faces, t.edge_type, gbar):
                     out.append((VERTEX_EDGE, ga, gb, p, e, d))
     for p in range(vptr[A], vptr[A + 1]):
         for q in range(vptr[B], vptr[B + 1]):
@@ -272,50 +267,17 @@ def test_culling_keeps_every_pair_of_the_unculled_loops(rng):
         b = b.translated(np.array([along, 0.0, 0.0]) - b.vertices.mean(axis=0))
         side = rng.normal(size=3) * np.array([0.2, 1.0, 1.0])
         direction = side / np.linalg.norm(side)
-        for gap, ee_rule in itertools.product((0.3 * GBAR, 0.8 * GBAR, 1.5 * GBAR), (False, True)):
+        for gap in (0.3 * GBAR, 0.8 * GBAR, 1.5 * GBAR):
             placed = _place_at_gap(a, b, direction, gap)
             x, t = scene([a, placed])
-            found, ints, floats, _ = pairs_of([a, placed], ee_rule=ee_rule)
-            reference = _unculled_pairs(x, 0, 1, GBAR, t, ee_rule)
+            found, ints, floats, _ = pairs_of([a, placed])
+            reference = _unculled_pairs(x, 0, 1, GBAR, t)
             assert [tuple(r) for r in ints[:, :5]] == [r[:5] for r in reference]
             np.testing.assert_array_equal(floats[:, GAP], [r[5] for r in reference])
             checked += len(reference)
             if gap < GBAR:
                 assert floats[:, GAP].min() == pytest.approx(gap, rel=1e-6)
     assert checked >= 8
-
-
-def _edge_edge_links(ints, topo):
-    """For each vertex-edge record (P, E): how many edge-edge records join E with an edge at P."""
-    ee = {frozenset(r) for r in ints[ints[:, KIND] == EDGE_EDGE][:, [FEATURE_A, FEATURE_B]]}
-    links = {}
-    for p, e in ints[ints[:, KIND] == VERTEX_EDGE][:, [FEATURE_A, FEATURE_B]]:
-        at_p = topo.vertex_edges[topo.vertex_edge_ptr[p] : topo.vertex_edge_ptr[p + 1]]
-        links[(p, e)] = sum(frozenset((int(k), int(e))) in ee for k in at_p)
-    return links
-
-
-def test_the_edge_edge_rule_drops_the_vertex_edge_pairs_the_paper_names(rng):
-    """Formulation 4.4's last clause, checked from the records alone: with `edge_edge_rule` the
-    records are those without it less exactly the vertex-edge pairs (P, E) that two or more
-    edge-edge records join (E with edges at P), the spots the default counts up to three times.
-    Pairs of sand grains at 0.05-0.8 gbar, in random directions."""
-    dropped = 0
-    for seed in range(8):
-        a = sand_grain(seed=500 + seed, size=1.0)
-        b = sand_grain(seed=600 + seed, size=0.8).rotated(rotation_matrix(rng.normal(size=3)))
-        direction = rng.normal(size=3)
-        for gap in (0.05 * GBAR, 0.3 * GBAR, 0.8 * GBAR):
-            placed = _place_at_gap(a, b, direction / np.linalg.norm(direction), gap)
-            _, kept_all, _, topo = pairs_of([a, placed])
-            _, ruled, _, _ = pairs_of([a, placed], ee_rule=True)
-            links = _edge_edge_links(kept_all, topo)
-            named = {pe for pe, n in links.items() if n >= 2}
-            expected = [tuple(r) for r in kept_all
-                        if not (r[KIND] == VERTEX_EDGE and (r[FEATURE_A], r[FEATURE_B]) in named)]  # fmt: skip
-            assert [tuple(r) for r in ruled] == expected
-            dropped += len(named)
-    assert dropped >= 5  # the scenes hold such spots: the test would pass vacuously otherwise
 
 
 def test_action_equals_reaction_and_no_net_moment(rng):
@@ -406,24 +368,3 @@ def test_pair_inverse_mass_is_the_eigenvalue_of_the_pair_spring(rng):
             spring[3 * node : 3 * node + 3] += wi * g / np.linalg.norm(g)
         s = spring / np.sqrt(np.repeat(mass, 3))
         assert np.linalg.eigvalsh(np.outer(s, s))[-1] == pytest.approx(inv_m, rel=1e-9)
-
-
-def test_the_edge_edge_rule_is_a_contact_key_the_model_passes_on():
-    """`[contact] edge_edge_rule` (the key: test_contact_law): the contact model's searches, full
-    and by feature list, apply its law's rule: the records of find_contacts with it."""
-    from vemdem.contact.model import ContactModel
-
-    a = sand_grain(seed=502, size=1.0)
-    b = sand_grain(seed=602, size=0.8).rotated(rotation_matrix(np.array([0.3, -1.1, 0.4])))
-    b = _place_at_gap(a, b, np.array([0.0, 0.0, 1.0]), 0.05 * GBAR)
-    x, topo = scene([a, b])
-    candidates = candidate_pairs(x, topo.grain_vertex_ptr, GBAR)
-    for rule in (False, True):
-        model = ContactModel(x, [a.faces, b.faces], np.array([0, a.n_vertices, len(x)]), np.ones(2),
-                             InterfaceLaw(GBAR, 1e9, edge_edge_rule=rule))  # fmt: skip
-        expected = find_contacts(x, candidates, topo, GBAR, ee_rule=rule)[0]
-        np.testing.assert_array_equal(model.pairs(x, 0.0, candidates)[1], expected)
-        model.keep_feature_list(2 * GBAR)
-        np.testing.assert_array_equal(model.pairs(x, 0.0, candidates)[1], expected)
-    ruled, plain = (find_contacts(x, candidates, topo, GBAR, ee_rule=r)[0] for r in (True, False))
-    assert len(ruled) < len(plain)  # this scene has a spot the rule counts once

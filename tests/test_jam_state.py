@@ -97,17 +97,18 @@ def test_the_jam_bench_steps_the_rebuilt_lid_run_with_the_settings_it_is_given(i
     cfg, out = interrupted
     jam, bench = _module("jam_state"), _module("bench_jam")
     jam.jam_state(out / "checkpoint.npz", PACK, cfg, tmp_path / "jam.npz")
-    newton = bench.newton_settings(["line_search=true", "accuracy=0.5", "ccd=pairwise"])
-    assert newton == {"line_search": True, "accuracy": 0.5, "ccd": "pairwise"}
+    newton = bench.newton_settings(["freeze_cycles=false", "stall_share=0.25", "ccd_fraction=0.5"])
+    assert newton == {"freeze_cycles": False, "stall_share": 0.25, "ccd_fraction": 0.5}
     integrator, state = bench.jam_integrator(tmp_path / "jam.npz", {"solver.max_iterations": 30}, newton)
     params = integrator.params
-    assert params.max_iterations == 30 and params.line_search and params.accuracy == 0.5 and params.ccd == "pairwise"
+    assert params.max_iterations == 30 and not params.freeze_cycles and params.stall_share == 0.25
+    assert params.ccd_fraction == 0.5
     assert params.gamma == 0.6 and params.linear is not None  # the rest is the example's
     result = bench.run_jam(integrator, state, 1e-6, seconds=600.0, steps=3)
     assert result["accepted"] == 3 and 3e-6 <= result["simulated_s"] < 1e-3
     _, lid_fz = wall_force_record(out / "walls.csv", "lid")
     # three steps of at most a few microseconds: the lid has hardly moved, nor has its force
     assert result["lid_force_first"] == pytest.approx(lid_fz[-1], rel=0.2)
-    for bad in (["nope=1"], ["line_search=yes"], ["max_iterations=many"], ["linear=direct"]):
+    for bad in (["nope=1"], ["freeze_cycles=yes"], ["max_iterations=many"], ["linear=direct"]):
         with pytest.raises(ValueError, match="--newton"):
             bench.newton_settings(bad)

@@ -22,11 +22,12 @@ from vemdem.solver.api import make_integrator
 from vemdem.solver.state import RunStats
 
 PACK = Path(__file__).parent / "data" / "pack30_mu015.npz"
-# Newton from the step's start, the state the rule was measured on: with the rigid predictor (the
-# default) the same creep takes 396 strict against 397 iterations, the rule
-# still saving rejected steps (7 against 4, docs/dynamics.md)
+# The rule was measured with Newton started from the step's start (398 against 402 iterations, 1
+# against 2 rejected steps); from the rigid predictor, Newton's only first iterate since, the same
+# creep takes 397 against 396 iterations, the rule still saving rejected steps (4 against 7,
+# docs/dynamics.md)
 CONFIG = {"scenario": "lid_compression", "initial_state": str(PACK), "lid": {"start": 5e-3, "end": 4e-3},
-          "solver": {"integrator": "implicit", "mass_scaling": 1.0, "dt_max": 1e-3, "predictor": "rest"}}  # fmt: skip
+          "solver": {"integrator": "implicit", "mass_scaling": 1.0, "dt_max": 1e-3}}  # fmt: skip
 DURATION = 0.012
 
 
@@ -56,10 +57,10 @@ def test_the_strict_iteration_stalls_on_this_pack(runs):
     assert strict.rejections.get("newton", 0) >= 1  # measured: 2 steps in 0.012 s
 
 
-def test_the_stall_rule_saves_iterations_and_rejections(runs):
+def test_the_stall_rule_saves_rejections_at_the_same_iterations(runs):
     (_, _, strict, _), (_, _, rule, _) = runs
-    assert rule.newton_iterations < strict.newton_iterations  # measured: 398 against 402
-    assert rule.rejections.get("newton", 0) < strict.rejections.get("newton", 0)  # 1 against 2
+    assert rule.newton_iterations <= 1.02 * strict.newton_iterations
+    assert rule.rejections.get("newton", 0) < strict.rejections.get("newton", 0)
 
 
 def test_the_stall_rule_keeps_the_trajectory(runs):

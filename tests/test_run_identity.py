@@ -41,8 +41,8 @@ def test_choices_keep_only_what_differs_from_the_defaults():
 
 def test_writing_a_default_out_does_not_change_the_identity():
     cfg_a, _ = checked_config(drop_raw())
-    default = scene_mod.SCHEMA["solver"]["max_iterations"].default
-    cfg_b, _ = checked_config(drop_raw(max_iterations=default))
+    default = scene_mod.SCHEMA["solver"]["easy_iterations"].default
+    cfg_b, _ = checked_config(drop_raw(easy_iterations=default))
     assert run_identity(cfg_a, scene_mod.SCHEMA).fingerprint == run_identity(cfg_b, scene_mod.SCHEMA).fingerprint
 
 

@@ -144,23 +144,19 @@ def spinning_grain(rate):
     return scene, initial_state(scene, x, v)
 
 
-def test_newton_on_a_spinning_grain_needs_fewer_iterations_and_reaches_the_same_state():
-    scene, state = spinning_grain(100.0)  # 0.14 rad per step of 1e-3 s (the straight update: 13 iterations)
-    results = {}
-    # the exact element tangent: both iterations then end quadratically converged, on the same root to
-    # round-off; with the rotated tangent (the default) they end at Newton's tolerance (7e-11 m here)
-    for update in ("linear", "rigid"):
-        params = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("direct"), update=update, stall_share=1.0,
-                                   rotated_tangent=0.0)  # fmt: skip
-        new, info = newmark_step(scene, state, 1e-3, params)
-        results[update] = (new.x, info.iterations)
-    (x_lin, it_lin), (x_rig, it_rig) = results["linear"], results["rigid"]
-    assert it_rig <= it_lin - 3
-    assert np.abs(x_rig - x_lin).max() < 1e-12
+def test_newton_on_a_spinning_grain_converges_in_few_iterations_with_either_tangent():
+    """Each grain's update along its rigid rotation: a grain spinning 0.14 rad per step of 1e-3 s
+    converges in at most 10 iterations (the straight update x + alpha dx took 13, design notes),
+    with the exact element tangent (quadratically) and with the rotated one (the default, to
+    Newton's tolerance), on the same root."""
+    scene, state = spinning_grain(100.0)
+    exact = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("direct"), stall_share=1.0, rotated_tangent=0.0)
+    x_exact, info = newmark_step(scene, state, 1e-3, exact)
+    assert info.iterations <= 10
     rotated = NewmarkParameters(0.3025, 0.6, linear=make_linear_solver("direct"), stall_share=1.0)
     new, info = newmark_step(scene, state, 1e-3, rotated)
-    assert info.iterations <= it_lin - 3
-    assert np.abs(new.x - x_rig).max() < rotated.xtol * np.abs(x_rig - state.x).max()
+    assert info.iterations <= 10
+    assert np.abs(new.x - x_exact.x).max() < rotated.xtol * np.abs(x_exact.x - state.x).max()
 
 
 def ipctk_pair_distance(kind, xs, plane_face=False):

@@ -1,5 +1,6 @@
-"""Configs: the schema machinery (schema.py), every table and cross-field rule (tables.py) and
-the step from a checked config to typed options and a scene (build.py).
+"""Configs: the schema machinery (schema.py), every table (tables.py; the laboratory tests':
+lab_tables.py) with its checks (checks.py), the cross-field rules (rules.py) and the step from a
+checked config to typed options and a scene (build.py).
 
 Only `config` and `scenarios` hold config dicts; everything below them takes typed values."""
 

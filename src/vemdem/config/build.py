@@ -4,7 +4,7 @@ in the scene (`Scene.mass_scaling`), from where every summary reports it."""
 from __future__ import annotations
 
 import warnings
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,11 +45,8 @@ def vem_options_from(cfg: dict) -> VemOptions:
 def solver_options_from(cfg: dict) -> SolverOptions:
     """The `[solver]` table as SolverOptions."""
     s = cfg["solver"]
-    keys = ("integrator", "beta", "gamma", "dt", "dt_min", "dt_max", "max_iterations", "easy_iterations",
-            "grow_after", "freeze_cycles", "break_stick_cycles", "hold_damping_cycles", "rotated_tangent",
-            "woodbury_dofs", "impact_steps", "entry_fraction", "energy_growth", "safety", "mass_damping", "linear",
-            "predictor", "newton_xtol")  # fmt: skip
-    return SolverOptions(**{k: s[k] for k in keys})
+    # every key SolverOptions has (mass_scaling is the scene's: scene_from)
+    return SolverOptions(**{f.name: s[f.name] for f in fields(SolverOptions)})
 
 
 # ---------------------------------------------------------------------------- grains

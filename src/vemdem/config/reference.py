@@ -1,13 +1,13 @@
-"""The config reference page, generated from the schemas of `config.tables`.
+"""The config reference page, generated from the schemas of `config.tables` and `config.lab_tables`.
 
 `python -m vemdem.config.reference > docs/reference/config.md` writes it: every scenario, its keys
 and tables, each key with its type, default, meaning (`Field.doc`) and the values it accepts (the
 choices of a choice key, the bound its check states). A test regenerates the page and compares, so
-the page cannot fall behind `tables.py`.
+the page cannot fall behind them.
 
-Nothing here is hand-written about a key: a table or a key added to `tables.py` appears in the page
-when it is regenerated. Scenario schemas are found as the module-level dicts of `tables.py` with a
-`scenario` key; shared tables (material, solver, ...) as the other module-level tables, each shown
+Nothing here is hand-written about a key: a table or a key added to `tables.py` (or `lab_tables.py`)
+appears in the page when it is regenerated. Scenario schemas are found as the module-level dicts of
+those modules with a `scenario` key; shared tables (material, solver, ...) as the other module-level tables, each shown
 once, and a scenario's table that is a shared one with other defaults (`with_defaults`) is shown as
 that table plus the defaults it changes.
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
-from . import tables
+from . import lab_tables, tables
 from .schema import REQUIRED, AutoOrNumber, Field, TableList
 
 COMMAND = "python -m vemdem.config.reference > docs/reference/config.md"
@@ -54,8 +54,13 @@ def _is_scenario(obj) -> bool:
 
 
 def scenario_schemas() -> dict[str, dict]:
-    """Scenario name -> its schema, in the order `tables.py` defines them."""
-    return {obj["scenario"].kind[0]: obj for obj in vars(tables).values() if _is_scenario(obj)}
+    """Scenario name -> its schema, in the order `tables.py`, then `lab_tables.py`, define them."""
+    return {obj["scenario"].kind[0]: obj for obj in _constants().values() if _is_scenario(obj)}
+
+
+def _constants() -> dict:
+    """The module-level names of the schema modules, the lab tests' after the rest."""
+    return {**vars(tables), **{k: v for k, v in vars(lab_tables).items() if k not in vars(tables)}}
 
 
 def _changed_defaults(table: dict, base: dict) -> dict | None:
@@ -83,7 +88,7 @@ def shared_tables() -> dict[str, dict]:
     """Module constant -> table, for the tables scenarios share (a table that is an earlier one with
     other defaults, as PAPER_MATERIAL is MATERIAL's, is not one of its own)."""
     out: dict[str, dict] = {}
-    for name, obj in vars(tables).items():
+    for name, obj in _constants().items():
         if not name.isupper() or not _is_table(obj) or _is_scenario(obj):
             continue
         if any(_changed_defaults(obj, base) is not None for base in out.values()):
@@ -208,7 +213,7 @@ class _Page:
         out = [
             "# Config reference",
             "",
-            f"<!-- generated from src/vemdem/config/tables.py by `{COMMAND}`: do not edit by hand -->",
+            f"<!-- generated from src/vemdem/config/tables.py and lab_tables.py by `{COMMAND}`: do not edit by hand -->",
             "",
             "A run is one TOML file; its `scenario` key picks the schema below. Every key is checked "
             "before anything runs: an unknown key, a missing required key, a value of the wrong type or "
@@ -221,9 +226,9 @@ class _Page:
             "written as integers (`1` for `1.0`); lengths are in metres, times in seconds. Rules that tie "
             "several keys together (for example `contact.mu_d` at most `contact.mu_s`, `solver.dt_min` at most "
             "`solver.dt_max`, `lid.end` below `lid.start`, the frame count of `output.every`) are checked "
-            "after the keys, by `vemdem.config.tables.check_rules`.",
+            "after the keys, by `vemdem.config.rules.check_rules`.",
             "",
-            f"This page is generated from `src/vemdem/config/tables.py`: `{COMMAND}` rewrites it.",
+            f"This page is generated from `src/vemdem/config/tables.py` and `lab_tables.py`: `{COMMAND}` rewrites it.",
             "",
             "## Scenarios",
             "",
@@ -285,7 +290,7 @@ class _Page:
 
 
 def markdown() -> str:
-    """The config reference page (Markdown), from the schemas of `config.tables`."""
+    """The config reference page (Markdown), from the schemas of `config.tables` and `config.lab_tables`."""
     return _Page().render()
 
 

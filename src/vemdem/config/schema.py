@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -123,18 +124,30 @@ def _coerce(key: str, value, kind):
     return value
 
 
-def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
-    """Check `data` against `schema` (nested dicts of Field) and fill defaults."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
+def _refuse_unknown(data: dict, schema: dict, prefix: str, removed: dict) -> None:
+    """A ConfigError for the first key of `data` that `schema` does not know: one the package
+    removed (`removed`: dotted key, without table indices, -> why) is named as removed."""
     unknown = sorted(set(data) - set(schema))
+    for key in unknown:
+        why = removed.get(re.sub(r"\[\d+\]", "", prefix + key))
+        if why:
+            raise ConfigError(f"{prefix}{key}: this key was removed ({why}); delete it")
     if unknown:
         raise ConfigError(f"{prefix}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(schema))})")
+
+
+def apply_schema(data: dict, schema: dict, prefix: str = "", removed: dict | None = None) -> dict:
+    """Check `data` against `schema` (nested dicts of Field) and fill defaults. `removed`: the
+    dotted names of keys the package no longer has (-> why), refused as such."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
+    removed = removed or {}
+    _refuse_unknown(data, schema, prefix, removed)
     out = {}
     for key, spec in schema.items():
         name = prefix + key
         if isinstance(spec, dict):
-            out[key] = apply_schema(data.get(key, {}), spec, name + ".")
+            out[key] = apply_schema(data.get(key, {}), spec, name + ".", removed)
             continue
         if isinstance(spec, TableList):
             items = data.get(key, [])
@@ -142,7 +155,7 @@ def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
                 raise ConfigError(f"{name}: expected an array of tables ([[{key}]]), got {items!r}")
             if len(items) < spec.min_items:
                 raise ConfigError(f"{name}: at least {spec.min_items} [[{key}]] table(s) required")
-            out[key] = [apply_schema(item, spec.schema, f"{name}[{i}].") for i, item in enumerate(items)]
+            out[key] = [apply_schema(item, spec.schema, f"{name}[{i}].", removed) for i, item in enumerate(items)]
             continue
         if key not in data:
             if spec.default is REQUIRED:

@@ -194,18 +194,6 @@ def accd_alpha(ints, x_all, n_vertices, plane_node0, dx, vertex_grain, c, t, phi
     return alpha_min
 
 
-@njit(cache=True)
-def _candidate_ratio(pairs, trans, spread, gbar):
-    """min over candidate surface pairs of gbar / approach (their distance when no feature pair is
-    active; when one is, _active_ratio is the sharper bound and is taken too)."""
-    ratio = np.inf
-    for k in range(len(pairs)):
-        move = _approach(trans, spread, pairs[k, 0], pairs[k, 1])
-        if move > 0.0:
-            ratio = min(ratio, gbar / move)
-    return ratio
-
-
 def _top2(values: np.ndarray) -> float:
     return float(np.sort(values)[-2:].sum()) if len(values) > 1 else 0.0
 
@@ -238,33 +226,6 @@ def free_distance_ratio(trans: np.ndarray, spread: np.ndarray, ints: np.ndarray,
     return ratio
 
 
-def pairwise_distance_ratio(trans: np.ndarray, spread: np.ndarray, moved: np.ndarray, ints: np.ndarray,
-                            floats: np.ndarray, candidates: np.ndarray, gbar: float, margin: float,
-                            plane_distance: np.ndarray, nodes=_NO_NODES) -> float:  # fmt: skip
-    """free_distance_ratio with a bound per pair instead of one for the whole scene:
-    - feature pairs within the layer (ints): alpha approach < gap;
-    - candidate surface pairs of the step's search: at least gbar apart when not in ints;
-    - every other pair was at least gbar + margin apart at the start of the step (the search's
-      reach) and its surfaces have moved by `moved` since: alpha top2 < gbar + margin - top2(moved);
-    - planes (plane_distance, (G, n_planes) distance of each grain's lowest vertex over each
-      active plane): alpha (|trans_g| + spread_g) < that distance.
-    A grain falling fast no longer shortens the updates of every other pair (the global bound did)."""
-    ratio = _active_ratio(trans, spread, ints, floats, *nodes) if len(ints) else np.inf
-    pairs = np.ascontiguousarray(candidates, dtype=np.int64)
-    if len(pairs):
-        ratio = min(ratio, _candidate_ratio(pairs, trans, spread, gbar))
-    top2 = _top2(_reach(trans, spread))
-    if top2 > 0:
-        room = gbar + margin - _top2(moved)
-        ratio = min(ratio, max(room, 0.0) / top2)
-    if plane_distance.size:
-        d = (np.linalg.norm(trans, axis=1) + spread)[: len(plane_distance)]
-        moving = d > 0
-        if moving.any():
-            ratio = min(ratio, float(np.min(plane_distance[moving] / d[moving, None])))
-    return ratio
-
-
 def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> int:
     """Pairs that appear only in a search at the end of a step and are already inside the
     activation gap: the step passed them by (docs/contact.md). `contact` is the ContactModel."""
@@ -275,8 +236,7 @@ def missed_pairs(contact, x: np.ndarray, t: float, candidates: np.ndarray) -> in
     new = fresh[~np.isin(fresh[:, 0] * width + fresh[:, 1], candidates[:, 0] * width + candidates[:, 1])]
     if len(new) == 0:
         return 0
-    ints, _ = find_contacts(contact.all_positions(x, t), new, contact.topology, contact.law.activation_gap,
-                            ee_rule=contact.law.edge_edge_rule)  # fmt: skip
+    ints, _ = find_contacts(contact.all_positions(x, t), new, contact.topology, contact.law.activation_gap)
     return len(ints)
 
 
@@ -319,15 +279,6 @@ def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.n
         return np.inf
     inverse = scaled_pair_inverse_masses(inv_mass_all, ints, floats, mobility, lam)
     return damped_pair_step(inverse, floats, law_params, m_eq, zeta)
-
-
-def stiffest_pair_frequency(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params) -> float:
-    """omega of the stiffest active pair: omega^2 = k(g) sum_i w_i^2 / m_i (the pair's spring on the
-    lumped masses of its nodes; a wall node has 1/m = 0). 0 without pairs."""
-    if len(ints) == 0:
-        return 0.0
-    k = normal_stiffness(np.ascontiguousarray(floats[:, GAP]), law_params)
-    return float(np.sqrt(np.max(k * pair_inverse_masses(inv_mass_all, ints, floats))))
 
 
 def scaled_pair_inverse_masses(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray,

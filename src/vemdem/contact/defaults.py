@@ -32,7 +32,7 @@ def default_contact_laws(size: float, E: float, density: float, gravity: float =
                          mu_d: float | None = None, **overrides) -> tuple[InterfaceLaw, FrictionLaw]:  # fmt: skip
     """Interface and friction laws for grains of equivalent diameter `size`; keyword overrides
     (activation_gap, reference_force, penalty, switch_factor, penalty_exponent, barrier_exponent,
-    tangential_penalty, tangential_viscosity, damping_ratio, edge_fade, edge_edge_rule) replace single defaults."""
+    tangential_penalty, tangential_viscosity, damping_ratio) replace single defaults."""
     mu_d = mu_s if mu_d is None else mu_d
     gbar = overrides.pop("activation_gap", GAP_FRACTION * size)
     factor = overrides.pop("switch_factor", SWITCH_FACTOR)
@@ -46,8 +46,7 @@ def default_contact_laws(size: float, E: float, density: float, gravity: float =
     if k_switch > E * size:  # never stiffer than the grain itself
         eps1 *= E * size / k_switch
     eps1 = overrides.pop("penalty", eps1)
-    law = InterfaceLaw(gbar, eps1, n1, factor, n2, bool(overrides.pop("edge_fade", False)),
-                       bool(overrides.pop("edge_edge_rule", False)))  # fmt: skip
+    law = InterfaceLaw(gbar, eps1, n1, factor, n2)
     friction = FrictionLaw(
         mu_s=mu_s,
         mu_d=mu_d,

@@ -184,7 +184,7 @@ def _build(x, grain_pairs, which, reach, vptr, fptr, eptr, faces, edges, edge_ty
 
 @njit(cache=True)
 def entry_records(x, A, B, entries, start, stop, gbar, faces, edges, edge_faces, edge_type, v_face_ptr, v_faces,
-                  v_edge_ptr, v_edges, ints, floats, ee_rule):  # fmt: skip
+                  v_edge_ptr, v_edges, ints, floats):  # fmt: skip
     """The records of the entries start..stop of grain pair (A, B): the search's exact tests."""
     cap = len(ints)
     n = np.int64(0)
@@ -197,11 +197,9 @@ def entry_records(x, A, B, entries, start, stop, gbar, faces, edges, edge_faces,
         elif code == EE:
             n = ee_record(x, a, b, A, B, edges, edge_type, gbar, ints, floats, n, cap)
         elif code == VE_A:
-            n = ve_record(x, a, b, A, B, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule,
-                          ints, floats, n, cap)  # fmt: skip
+            n = ve_record(x, a, b, A, B, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap)
         elif code == VE_B:
-            n = ve_record(x, a, b, B, A, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule,
-                          ints, floats, n, cap)  # fmt: skip
+            n = ve_record(x, a, b, B, A, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap)
         else:
             n = vv_record(x, a, b, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar, ints, floats, n,
                           cap)  # fmt: skip
@@ -210,11 +208,11 @@ def entry_records(x, A, B, entries, start, stop, gbar, faces, edges, edge_faces,
 
 @njit(parallel=True, cache=True)
 def _records(x, grain_pairs, ptr, entries, gbar, faces, edges, edge_faces, edge_type, v_face_ptr, v_faces, v_edge_ptr,
-             v_edges, cap, ints, floats, counts, ee_rule):  # fmt: skip
+             v_edges, cap, ints, floats, counts):  # fmt: skip
     for k in prange(len(grain_pairs)):
         counts[k] = entry_records(x, grain_pairs[k, 0], grain_pairs[k, 1], entries, ptr[k], ptr[k + 1], gbar, faces,
                                   edges, edge_faces, edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges,
-                                  ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap], ee_rule)  # fmt: skip
+                                  ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap])  # fmt: skip
 
 
 @njit(cache=True)
@@ -294,9 +292,8 @@ class FeatureList:
         self.builds = 0  # grain-pair lists built so far (benchmarks read it)
         self._last = None  # node positions at the last call
 
-    def find(self, x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32,
-             ee_rule: bool = False):  # fmt: skip
-        """(ints, floats): the records find_contacts(x, grain_pairs, topo, gbar, ee_rule=ee_rule) returns."""
+    def find(self, x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
+        """(ints, floats): the records find_contacts(x, grain_pairs, topo, gbar) returns."""
         grain_pairs = np.ascontiguousarray(grain_pairs, dtype=np.int64).reshape(-1, 2)
         x = np.ascontiguousarray(x, dtype=np.float64)
         vptr = topo.grain_vertex_ptr
@@ -311,7 +308,7 @@ class FeatureList:
         stale = np.flatnonzero((slot < 0) | (self._used[np.maximum(slot, 0)] > self.skin))
         if len(stale) or not np.array_equal(keys, self._keys):
             self._update(x, grain_pairs, keys, slot, stale, topo, gbar + self.skin)
-        return self._records(x, grain_pairs, topo, gbar, capacity, bool(ee_rule))
+        return self._records(x, grain_pairs, topo, gbar, capacity)
 
     def _reset(self, x, n_bodies, gbar):
         self._last = x.copy()
@@ -363,7 +360,7 @@ class FeatureList:
             capacity = int(counts.max())
         return out, counts, capacity
 
-    def _records(self, x, grain_pairs, topo, gbar, capacity, ee_rule):
+    def _records(self, x, grain_pairs, topo, gbar, capacity):
         while True:
             m = len(grain_pairs)
             ints = np.empty((m * capacity, INT_COLS), dtype=np.int64)
@@ -371,7 +368,7 @@ class FeatureList:
             counts = np.zeros(m, dtype=np.int64)
             _records(x, grain_pairs, self._ptr, self._entries, gbar, topo.faces, topo.edges, topo.edge_faces,
                      topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces, topo.vertex_edge_ptr, topo.vertex_edges,
-                     capacity, ints, floats, counts, ee_rule)  # fmt: skip
+                     capacity, ints, floats, counts)  # fmt: skip
             if m == 0 or counts.max() <= capacity:
                 break
             capacity = int(counts.max())

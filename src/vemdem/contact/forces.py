@@ -16,7 +16,6 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from .fade import fade_conservative, fade_conservative_tangent, is_faded
 from .law import normal_force, normal_potential
 from .narrow import (
     EDGE_EDGE,
@@ -57,8 +56,6 @@ def _local_forces(x, ints, floats, law, energy, local_force):
             pair_nodes(x, ints, c, nn, xs)
             d = gap_gradient_into(kind, xs, floats[c, C0], floats[c, C1], grad, w0, D, w, g)
             _normal_terms(c, nn, d, grad, law, energy, local_force)
-            if is_faded(kind, xs, law):
-                fade_conservative(xs, law, c, energy, local_force)
 
 
 @njit(parallel=True, cache=True)
@@ -80,8 +77,6 @@ def _local_terms(x, ints, floats, law, energy, local_force, local_tangent):
                 gr = grad[r // 3, r % 3]
                 for s in range(3 * nn):
                     local_tangent[c, r, s] = kd * gr * grad[s // 3, s % 3] - fn * hess[r, s]
-            if is_faded(kind, xs, law):
-                fade_conservative_tangent(xs, law, c, energy, local_force, local_tangent)
 
 
 @njit(cache=True)

@@ -38,7 +38,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from .fade import fade_dissipative, fade_dissipative_tangent, is_faded
 from .law import normal_force, normal_stiffness_slope
 from .narrow import (
     EDGE_EDGE,
@@ -217,8 +216,6 @@ def dissipative_forces(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, l
         for c in range(lo, hi):
             _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                         stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip
-            if is_faded(ints[c, KIND], xs, law):
-                fade_dissipative(xs, law, c, local_force)
 
 
 @njit(parallel=True, cache=True)
@@ -235,15 +232,8 @@ def dissipative_terms(x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, la
         for c in range(lo, hi):
             _pair_force(c, x, v, a4, ints, c_prev, gt_prev, was_active, was_stick, law, fr, m_eq, local_force,
                         stick_out, gt_out, xs, vs, out, w0, D, wp, w, store)  # fmt: skip
-            kind = ints[c, KIND]
-            if is_faded(kind, xs, law):  # the edge-edge fade weighs this residual and its Jacobian
-                own = np.zeros((18, 18))
-                dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
-                                    fr[c], m_eq[c], own, w0, D, wp, w, J, vec)  # fmt: skip
-                fade_dissipative_tangent(xs, law, c, local_force, own, local_tangent)
-            else:
-                dissipative_tangent(kind, xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
-                                    fr[c], m_eq[c], local_tangent[c], w0, D, wp, w, J, vec)  # fmt: skip
+            dissipative_tangent(ints[c, KIND], xs, vs, a4, c_prev[c], gt_prev[c], was_active[c], was_stick[c], law,
+                                fr[c], m_eq[c], local_tangent[c], w0, D, wp, w, J, vec)  # fmt: skip
 
 
 @njit(cache=True)

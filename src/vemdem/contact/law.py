@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 # indices into the packed parameter array used by the kernels
-GBAR, GBB, EPS1, N1, EPS2, N2, C2, FADE = range(8)
+GBAR, GBB, EPS1, N1, EPS2, N2, C2 = range(7)
 
 
 @dataclass(frozen=True)
@@ -31,10 +31,6 @@ class InterfaceLaw:
     penalty_exponent: float = 2.0  # n1
     switch_factor: float = 0.3  # gbb / gbar
     barrier_exponent: float = -2.0  # n2
-    edge_fade: bool = False  # weigh edge-edge records out near their edges' ends (contact/fade.py)
-    # the last clause of the paper's hierarchy (docs/contact.md): a vertex-edge pair yields to two
-    # eligible edge-edge pairs at its vertex
-    edge_edge_rule: bool = False
 
     def __post_init__(self):
         checks = [
@@ -64,7 +60,7 @@ class InterfaceLaw:
         eps1 = self.penalty
         eps2 = -eps1 * n1 * (gbar - gbb) ** (n1 - 1) / (n2 * gbb ** (n2 - 1))
         c2 = eps1 * (gbar - gbb) ** n1 - eps2 * gbb**n2
-        return np.array([gbar, gbb, eps1, n1, eps2, n2, c2, gbar if self.edge_fade else 0.0])
+        return np.array([gbar, gbb, eps1, n1, eps2, n2, c2])
 
 
 @njit(cache=True)

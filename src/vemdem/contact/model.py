@@ -315,11 +315,10 @@ class ContactModel:
         """Eligible pairs within the activation gap (or within `reach`, to look ahead)."""
         x_all = self.all_positions(x, t)
         gbar = self.law.activation_gap if reach is None else reach
-        rule = self.law.edge_edge_rule
         if reach is None and self.feature_list is not None:
-            ints, floats = self.feature_list.find(x_all, candidates, self.topology, gbar, ee_rule=rule)
+            ints, floats = self.feature_list.find(x_all, candidates, self.topology, gbar)
         else:
-            ints, floats = find_contacts(x_all, candidates, self.topology, gbar, ee_rule=rule)
+            ints, floats = find_contacts(x_all, candidates, self.topology, gbar)
         if len(floats) and floats[:, GAP].min() <= self.touching_gap:
             c = int(np.argmin(floats[:, GAP]))
             raise PenetrationError(f"grains {ints[c, GRAIN_A]} and {ints[c, GRAIN_B]} touch (gap {floats[c, GAP]:.3g} m, "

@@ -9,12 +9,11 @@ into the other's box (inflated by the activation gap) are tested pairwise:
                   by the vertex-face pairs of the planar region
     vertex-edge   LCP in range, gap <= gbar, and the hierarchy: a convex or flat edge yields to an
                   eligible vertex-face pair with either face at the edge, a concave edge only to
-                  both; with `[contact] edge_edge_rule` (the paper's hierarchy, docs/contact.md) also
-                  to two or more eligible edge-edge pairs between the edge and edges at the vertex.
-                  Off by default: the rule switches the record on inside the
-                  layer as they leave (an energy jump), and with the edge-edge fade, fade.py, it
-                  would leave the spot unsupported; off, one spot can count up to three times,
-                  which the angle of repose does not show beyond its scatter (docs/contact.md)
+                  both. The paper's last clause (it also yields to two or more eligible edge-edge
+                  pairs between the edge and edges at the vertex) is left out: it switches the
+                  record on inside the layer as they leave (an energy jump); without it one spot
+                  can count up to three times, which the angle of repose does not show beyond its
+                  scatter (docs/contact.md)
     vertex-vertex gap <= gbar, unless an eligible pair links either vertex with a face or an edge
                   at the other one
 
@@ -156,10 +155,8 @@ def _ee_gap(x, ea, eb, edges, edge_type, gbar):
 
 
 @njit(cache=True)
-def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule):
-    """The vertex-edge hierarchy (module docstring); with ee_rule also the last clause of the
-    paper's hierarchy (docs/contact.md):
-    the pair yields to two or more eligible edge-edge pairs between e and edges at p."""
+def _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
+    """The vertex-edge hierarchy (module docstring)."""
     fa = edge_faces[e, 0]
     fb = edge_faces[e, 1]
     ca = _vf_gap(x, p, fa, faces, gbar)[0] >= 0.0
@@ -169,13 +166,7 @@ def _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_p
             return False
     elif ca or cb:
         return False
-    if not ee_rule:
-        return True
-    linked = 0
-    for k in range(v_edge_ptr[p], v_edge_ptr[p + 1]):
-        if _ee_gap(x, v_edges[k], e, edges, edge_type, gbar)[0] >= 0.0:
-            linked += 1
-    return linked < 2
+    return True
 
 
 @njit(cache=True)
@@ -392,11 +383,9 @@ def ee_record(x, ea, eb, A, B, edges, edge_type, gbar, ints, floats, n, cap):
 
 
 @njit(cache=True)
-def ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar, ee_rule, ints, floats,
-              n, cap):  # fmt: skip
+def ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap):
     d, t = _ve_gap(x, p, e, edges, gbar)
-    if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar,
-                                          ee_rule):  # fmt: skip
+    if d >= 0.0 and _vertex_edge_survives(x, p, e, faces, edge_faces, edge_type, gbar):
         n = _record(ints, floats, n, cap, np.int64(VERTEX_EDGE), ga, gb, p, e, p, edges[e, 0], edges[e, 1],
                     np.int64(-1), t, 0.0, d)  # fmt: skip
     return n
@@ -413,8 +402,7 @@ def vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_ed
 
 @njit(cache=True)
 def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats,
-                        ee_rule):  # fmt: skip
+                        v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, ints, floats):  # fmt: skip
     """Fill ints/floats (capacity = len(ints)) with the eligible pairs of grains A and B.
     Returns the number found (which may exceed the capacity: then the caller retries)."""
     cap = len(ints)
@@ -437,8 +425,7 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
         for p in verts:
             for e in eds:
                 if _point_near_box(x, p, ebox, e, gbar):
-                    n = ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, v_edge_ptr, v_edges, gbar,
-                                  ee_rule, ints, floats, n, cap)  # fmt: skip
+                    n = ve_record(x, p, e, ga, gb, faces, edges, edge_faces, edge_type, gbar, ints, floats, n, cap)
     for p in vA:
         for q in vB:
             n = vv_record(x, p, q, A, B, faces, edges, v_face_ptr, v_faces, v_edge_ptr, v_edges, gbar, ints, floats, n,
@@ -448,20 +435,17 @@ def grain_pair_contacts(x, A, B, gbar, vptr, fptr, eptr, faces, edges, edge_face
 
 @njit(parallel=True, cache=True)
 def _all_pairs(x, grain_pairs, gbar, vptr, fptr, eptr, faces, edges, edge_faces, edge_type,
-               v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, cap, ints, floats, counts,
-               ee_rule):  # fmt: skip
+               v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox, cap, ints, floats, counts):  # fmt: skip
     for k in prange(len(grain_pairs)):
         counts[k] = grain_pair_contacts(
             x, grain_pairs[k, 0], grain_pairs[k, 1], gbar, vptr, fptr, eptr, faces, edges, edge_faces,
             edge_type, v_face_ptr, v_faces, v_edge_ptr, v_edges, glo, ghi, fbox, ebox,
-            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap], ee_rule,
+            ints[k * cap : (k + 1) * cap], floats[k * cap : (k + 1) * cap],
         )  # fmt: skip
 
 
-def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32,
-                  ee_rule: bool = False):  # fmt: skip
-    """Eligible contact pairs of the candidate grain pairs, as (ints, floats) record arrays; ee_rule:
-    the hierarchy's edge-edge clause (InterfaceLaw.edge_edge_rule).
+def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, capacity: int = 32):
+    """Eligible contact pairs of the candidate grain pairs, as (ints, floats) record arrays.
 
     Each grain pair gets `capacity` slots; when one overflows, the search is rerun with room
     for the largest count (fixed-capacity buffers keep the compiled kernel free of Python lists).
@@ -480,7 +464,6 @@ def find_contacts(x: np.ndarray, grain_pairs: np.ndarray, topo, gbar: float, cap
             x, grain_pairs, gbar, topo.grain_vertex_ptr, topo.grain_face_ptr, topo.grain_edge_ptr, topo.faces,
             topo.edges, topo.edge_faces, topo.edge_type, topo.vertex_face_ptr, topo.vertex_faces,
             topo.vertex_edge_ptr, topo.vertex_edges, glo, ghi, fbox, ebox, capacity, ints, floats, counts,
-            bool(ee_rule),
         )  # fmt: skip
         if m == 0 or counts.max() <= capacity:
             break

@@ -142,8 +142,9 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
             "reference_force": scene.contact.law.switch_force,
             "tangential_penalty": scene.contact.friction.tangential_penalty,
             "damping_ratio": scene.contact.friction.damping_ratio,
-            "edge_fade": scene.contact.law.edge_fade,
-            "edge_edge_rule": scene.contact.law.edge_edge_rule,
+            # the two options the contact law no longer has, kept for the readers of summary.json: always off
+            "edge_fade": False,
+            "edge_edge_rule": False,
         },
         "friction": friction_reach(run.out_dir / "history.csv", scene.contact.law.activation_gap,
                                    scene.contact.friction.tangential_penalty) if run.out_dir is not None else None,

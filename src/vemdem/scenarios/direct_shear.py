@@ -40,7 +40,7 @@ import numpy as np
 
 from ..analysis.direct_shear import HEADER, envelope_panel, envelopes, plot_envelopes, plot_shear, shear_figures
 from ..analysis.microstructure import coordination
-from ..config import ConfigError, tables
+from ..config import ConfigError, lab_tables
 from ..config.build import activation_gap_from, scene_from, solver_options_from
 from ..contact.walls import MeshWall, PlaneWall, ServoMotion
 from ..driver.stages import unbalanced_force
@@ -53,7 +53,7 @@ from .lab import STAGES, TwoStagePath, contact_at_stress, run_stages, write_summ
 from .pack import initial_state_from
 
 RESUMABLE = True
-SCHEMA = tables.DIRECT_SHEAR
+SCHEMA = lab_tables.DIRECT_SHEAR
 # A sweep over `key` gives Coulomb envelopes (sweep.add_envelopes): `fit` of a group's summaries,
 # `panel` and `plot` its figure
 ENVELOPE = {"key": "normal.stress", "fit": envelopes, "panel": envelope_panel, "plot": plot_envelopes}

@@ -4,6 +4,7 @@ from their defaults (config.choices) and their digest."""
 from __future__ import annotations
 
 from ..config import Field, choices, digest
+from ..config.tables import NEWTON_ITERATIONS, RIGID_NEWTON_ITERATIONS
 from ..driver.checkpoint import RunIdentity
 
 # The [solver] keys a --resume may change: they decide how the run steps (its first step, its bounds,
@@ -21,5 +22,15 @@ def run_identity(cfg: dict, schema: dict | None = None, solver_at: str = "solver
         adjustable = dict.fromkeys(f"{solver_at}.{k}" for k in STEP_CONTROL)
     else:
         fields = schema.get("solver", {})
-        adjustable = {f"solver.{k}": fields[k].default for k in STEP_CONTROL if isinstance(fields.get(k), Field)}
+        adjustable = {f"solver.{k}": _step_default(k, fields[k], cfg) for k in STEP_CONTROL
+                      if isinstance(fields.get(k), Field)}  # fmt: skip
     return RunIdentity(digest(picked), picked, legacy=digest(cfg), adjustable=adjustable)
+
+
+def _step_default(key: str, field: Field, cfg: dict):
+    """The value a step-control key has where the config leaves it out, as a resume reports it: for
+    `max_iterations` (not set: the integrator's own budget) the budget of the run's grains."""
+    if key == "max_iterations" and field.default is None:
+        rigid = cfg.get("model", {}).get("grains") == "rigid"
+        return RIGID_NEWTON_ITERATIONS if rigid else NEWTON_ITERATIONS
+    return field.default

@@ -41,7 +41,7 @@ from ..analysis.oedometer import (
     read_rows,
     turning_points,
 )
-from ..config import ConfigError, tables
+from ..config import ConfigError, lab_tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import PlaneWall, ServoMotion, box_walls, mirrored
 from ..driver.loop import simulate
@@ -57,7 +57,7 @@ from .lab import contact_at_stress
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
-SCHEMA = tables.OEDOMETER
+SCHEMA = lab_tables.OEDOMETER
 SIDES = ("wall -x", "wall +x", "wall -y", "wall +y")
 # the contact network where each stage ended (normals, normal forces), for fabric_rose_stages.png
 ROSE_FILE = "roses/stage_{}.npz"

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..analysis.pack import pack_measures
 from ..analysis.plots import plot_grains_3d
-from ..config import ConfigError, tables
+from ..config import ConfigError, apply_schema, tables
 from ..config.tables import SETTLING_DAMPING
 from ..config.build import resolve_path, scene_from, solver_options_from
 from ..contact.walls import box_walls
@@ -104,12 +104,17 @@ def pack_config(cfg: dict, reference_force: float | None = None) -> dict:
     model = cfg["model"]
     if table.pop("model") == "rigid":
         model, solver = {**model, "grains": "rigid"}, dict(solver, integrator="explicit")
-    settle = {k: field.default for k, field in SCHEMA["settle"].items()}
-    settle["kinetic_threshold"] = cfg["settle"]["kinetic_threshold"]
-    return {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
-            "model": model,
-            "contact": contact, "solver": solver, "settle": settle,
-            "output": {"every": SCHEMA["output"]["every"].default, "vtk": False}}  # fmt: skip
+    raw = {"scenario": "pack", **table, "gravity": cfg["gravity"], "material": cfg["material"], "vem": cfg["vem"],
+           "model": model, "contact": contact, "solver": solver,
+           "settle": {"kinetic_threshold": cfg["settle"]["kinetic_threshold"]}, "output": {"vtk": False}}  # fmt: skip
+    # through the pack's schema: every key it leaves out (a value None: not set) takes the pack
+    # scenario's own default, and a key the pack does not know is an error here, not a silent extra
+    return apply_schema(_set_only(raw), SCHEMA)
+
+
+def _set_only(table: dict) -> dict:
+    """`table` without its keys whose value is None (not set), in its inner tables too."""
+    return {k: _set_only(v) if isinstance(v, dict) else v for k, v in table.items() if v is not None}
 
 
 def _stage_fingerprint(pack_dir: Path):

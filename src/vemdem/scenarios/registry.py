@@ -6,7 +6,8 @@ from importlib import import_module
 from importlib.resources import files
 
 from ..config import ConfigError, apply_schema
-from ..config.tables import check_rules
+from ..config.rules import check_rules
+from ..config.tables import REMOVED
 
 SCENARIOS = {
     "grain_compression": "vemdem.scenarios.grain_compression",
@@ -54,7 +55,7 @@ def checked_config(raw: dict) -> tuple[dict, object]:
     if "scenario" not in raw:
         raise ConfigError("scenario: required key is missing")
     module = scenario_module(raw["scenario"])
-    cfg = apply_schema(raw, module.SCHEMA)
+    cfg = apply_schema(raw, module.SCHEMA, removed=REMOVED)
     check_rules(cfg)
     return cfg, module
 

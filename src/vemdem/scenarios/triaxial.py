@@ -46,7 +46,7 @@ from ..analysis.triaxial import (
     triaxial_figures,
     until_sheared,
 )
-from ..config import tables
+from ..config import lab_tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import PlaneWall, ServoMotion
 from ..driver.stages import unbalanced_force
@@ -59,7 +59,7 @@ from .lab import STAGES, TwoStagePath, contact_at_stress, run_stages, write_summ
 from .pack import initial_state_from
 
 RESUMABLE = True
-SCHEMA = tables.TRIAXIAL
+SCHEMA = lab_tables.TRIAXIAL
 LATERAL = ("wall -x", "wall +x", "wall -y", "wall +y")
 
 

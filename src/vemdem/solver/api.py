@@ -13,11 +13,12 @@ from typing import Protocol
 import numpy as np
 
 from ..model.scene import Scene
+from .defaults import NEWTON_ITERATIONS, RIGID_NEWTON_ITERATIONS, default
 from .explicit import (FEATURE_SKIN_GAPS, ExplicitIntegrator, ExplicitParameters, advance_explicit,
                        explicit_initial_state)
 from .linear import NAMES as LINEAR_SOLVERS
 from .linear import make_linear_solver
-from .newmark import PREDICTORS, NewmarkParameters, advance, initial_state
+from .newmark import NewmarkParameters, advance, initial_state
 from .rigid import RigidExplicit
 from .rigid_implicit import RigidNewmark
 from .state import RunStats, State, StepControl
@@ -27,42 +28,44 @@ INTEGRATORS = ("implicit", "explicit")
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """The `[solver]` table, checked and typed (config/build.py makes it)."""
+    """The `[solver]` table, checked and typed (config/build.py makes it). Every default is the
+    key's in the schema (config/tables.py, through solver/defaults.py); what each key does is
+    documented there and in docs/reference/config.md."""
 
-    integrator: str = "implicit"
-    beta: float = 0.3025
-    gamma: float = 0.6
-    dt: float = 1e-5
-    dt_min: float = 1e-10
-    dt_max: float = 1e-4
-    max_iterations: int = 15
-    newton_xtol: float = 1e-6  # implicit flexible: Newton's correction tolerance (NewmarkParameters.xtol)
-    easy_iterations: int = 8  # implicit flexible: Newton iterations of an "easy" step (StepControl)
-    grow_after: int = 3  # implicit flexible: easy steps in a row before the step grows (StepControl)
-    freeze_cycles: bool = True  # implicit flexible: pairs that cycle in and out of Newton's set stay in (or out)
-    # implicit flexible: pairs Newton flips between stick and slip 3 times in a step go on at mu_d
-    break_stick_cycles: bool = True
-    # implicit flexible: pairs whose damping Newton switches on and off 3 times in a step go on undamped
-    hold_damping_cycles: bool = True
-    # implicit flexible: the strain below which a grain's Newton block is its reference tangent rotated
-    rotated_tangent: float = 1e-4
-    # implicit flexible, grain-block: rotated blocks touched on at most this many dofs solved by Woodbury
-    woodbury_dofs: int = 36
-    impact_steps: float = 0.0
-    entry_fraction: float = 0.05
-    energy_growth: float = 1e-3
-    safety: float = 0.5
-    mass_damping: float = 0.0
-    linear: str = "auto"  # implicit: linear solver of the Newton systems (solver/linear/)
-    predictor: str = "rigid"  # implicit flexible: Newton's first iterate (solver/newmark.py NewmarkParameters)
+    integrator: str = default("integrator")
+    beta: float = default("beta")
+    gamma: float = default("gamma")
+    dt: float = default("dt")
+    dt_min: float = default("dt_min")
+    dt_max: float = default("dt_max")
+    max_iterations: int | None = default("max_iterations")  # None: the integrator's own budget
+    newton_xtol: float = default("newton_xtol")  # implicit flexible: NewmarkParameters.xtol
+    easy_iterations: int = default("easy_iterations")  # implicit flexible: StepControl
+    grow_after: int = default("grow_after")  # implicit flexible: StepControl
+    freeze_cycles: bool = default("freeze_cycles")
+    break_stick_cycles: bool = default("break_stick_cycles")
+    hold_damping_cycles: bool = default("hold_damping_cycles")
+    rotated_tangent: float = default("rotated_tangent")
+    woodbury_dofs: int = default("woodbury_dofs")
+    impact_steps: float = default("impact_steps")  # implicit: StepControl
+    entry_fraction: float = default("entry_fraction")  # implicit: StepControl
+    energy_growth: float = default("energy_growth")
+    safety: float = default("safety")
+    mass_damping: float = default("mass_damping")
+    linear: str = default("linear")  # implicit: linear solver of the Newton systems (solver/linear/)
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if self.linear not in LINEAR_SOLVERS:
             raise ValueError(f"linear must be one of {LINEAR_SOLVERS}, got {self.linear!r}")
-        if self.predictor not in PREDICTORS:
-            raise ValueError(f"predictor must be one of {PREDICTORS}, got {self.predictor!r}")
+
+    def newton_budget(self, rigid: bool) -> int:
+        """Newton's iterations per step: `max_iterations`, or where not set the integrator's own
+        (NEWTON_ITERATIONS; the rigid grains' quasi-Newton RIGID_NEWTON_ITERATIONS)."""
+        if self.max_iterations is not None:
+            return self.max_iterations
+        return RIGID_NEWTON_ITERATIONS if rigid else NEWTON_ITERATIONS
 
 
 class Integrator(Protocol):
@@ -95,9 +98,9 @@ class ImplicitNewmark:
     def __init__(self, scene: Scene, options: SolverOptions):
         self.scene = scene
         self.control = _control(options)
-        self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma, max_iterations=options.max_iterations,
-                                        xtol=options.newton_xtol,
-                                        mass_damping=options.mass_damping, predictor=options.predictor,
+        self.params = NewmarkParameters(beta=options.beta, gamma=options.gamma,
+                                        max_iterations=options.newton_budget(rigid=False), xtol=options.newton_xtol,
+                                        mass_damping=options.mass_damping,
                                         linear=make_linear_solver(options.linear, options.woodbury_dofs),
                                         freeze_cycles=options.freeze_cycles,
                                         break_stick_cycles=options.break_stick_cycles,
@@ -176,6 +179,7 @@ class RigidImplicit(RigidCentral):
         self.control = _control(options)
         self.integrator = RigidNewmark(scene, ExplicitParameters(mass_damping=options.mass_damping),
                                        beta=options.beta, gamma=options.gamma,
+                                       max_iterations=options.newton_budget(rigid=True),
                                        break_stick_cycles=options.break_stick_cycles,
                                        hold_damping_cycles=options.hold_damping_cycles)  # fmt: skip
 

@@ -43,6 +43,7 @@ from ..contact.ccd import (
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
 from ..model.scene import Scene
+from .defaults import default
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
 
@@ -54,11 +55,13 @@ FEATURE_SKIN_GAPS = 2.0
 
 @dataclass
 class ExplicitParameters:
-    safety: float = 0.5  # share of the critical step taken
+    safety: float = default("safety")  # share of the critical step taken
     approach_fraction: float = 0.25  # share of a gap a step may close, for pairs in the activation layer
-    entry_fraction: float = 0.5  # share of the layer a pair outside it may enter in one step
+    # share of the layer a pair outside it may enter in one step (not `[solver] entry_fraction`, the
+    # implicit impact control's)
+    layer_entry: float = 0.5
     skin_gaps: float = 2.0  # Verlet skin, in activation gaps
-    mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha m v
+    mass_damping: float = default("mass_damping")  # alpha (1/s): Rayleigh mass-proportional damping force alpha m v
 
 
 class ExplicitIntegrator:
@@ -137,7 +140,7 @@ class ExplicitIntegrator:
         - pairs in the activation layer (ints, floats at state.x): dt <= f g / (-dg/dt), with the
           exact gap rate of their contact points (the change of rate within a step, a dt^2 / 2,
           is four orders below the gap at the steps taken);
-        - everything farther than gbar may enter the layer by at most e gbar (`entry_fraction`,
+        - everything farther than gbar may enter the layer by at most e gbar (`layer_entry`,
           0.5: still above the switch to the barrier at 0.3 gbar): dt <= e gbar / s over the
           Verlet-list pairs (pairs outside the list cannot meet before it is refreshed) and
           (max(d - gbar, 0) + e gbar) / s over the planes, s a bound on the approach speed: the
@@ -177,13 +180,13 @@ class ExplicitIntegrator:
 
     def entry_depth(self, speed: float) -> float:
         """How deep a pair closing at `speed` may enter the layer in one step: e gbar
-        (`entry_fraction`), and no deeper than the depth p at which the step p / speed is the
+        (`layer_entry`), and no deeper than the depth p at which the step p / speed is the
         critical step of the penalty's stiffness there, k(p) = n1 eps1 p^(n1 - 1), on the largest
         inverse mass a pair can have (`entry_inverse_mass`): safety 2 / sqrt(k(p) m^-1) = p / speed."""
         law = self.scene.contact.law
         n1, c = law.penalty_exponent, 2.0 * self.params.safety
         stable = (c * speed / np.sqrt(n1 * law.penalty * self.entry_inverse_mass)) ** (2.0 / (n1 + 1.0))
-        return min(self.params.entry_fraction * law.activation_gap, stable)
+        return min(self.params.layer_entry * law.activation_gap, stable)
 
     def _mesh_velocities(self, t):
         return np.array([m.motion.velocity(t) for m in self.scene.contact.meshes]).reshape(-1, 3)

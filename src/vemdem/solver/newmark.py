@@ -28,7 +28,6 @@ from ..contact.ccd import (
     free_distance_ratio,
     impact_step_limit,
     missed_pairs,
-    pairwise_distance_ratio,
     plane_distances,
     surface_displacements,
 )
@@ -37,27 +36,26 @@ from ..model.bodies import InvertedElementError
 from ..model.motion import RigidRetraction, rigid_part
 from ..model.scene import Scene
 from .cycles import HeldPairs
+from .defaults import NEWTON_ITERATIONS, default
 from .linear import NewtonSystem, make_linear_solver, solve
 from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
 
-PREDICTORS = ("rigid", "acceleration", "rest")
-
-__all__ = ["PREDICTORS", "NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
+__all__ = ["NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
 
 
 @dataclass
 class NewmarkParameters:
-    beta: float = 0.3
-    gamma: float = 0.5
+    """Newmark's constants and Newton's rules; the defaults of those a `[solver]` key sets are the
+    key's (config/tables.py)."""
+
+    beta: float = default("beta")
+    gamma: float = default("gamma")
     rtol: float = 1e-6  # residual, relative to the largest of gravity, inertia and contact forces
-    xtol: float = 1e-6  # correction, relative to the step's displacement (floor: 1e-12 grain sizes)
-    max_iterations: int = 15
+    # correction, relative to the step's displacement (floor: 1e-12 grain sizes): `newton_xtol`
+    xtol: float = default("newton_xtol")
+    max_iterations: int = NEWTON_ITERATIONS
     ccd_fraction: float = 0.8  # share of the free distance a Newton update may use
-    mass_damping: float = 0.0  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
-    # first iterate: "rigid" (each grain's rigid part of x_n + dt v_n + dt^2/2 a_n), "acceleration"
-    # (all of it) or "rest" (x_n), CCD-bounded. "rigid" against "rest": a quarter fewer
-    # Newton iterations and 15 % less wall time on the 515-grain collapse at the real density (docs/dynamics.md)
-    predictor: str = "rigid"
+    mass_damping: float = default("mass_damping")  # alpha (1/s): Rayleigh mass-proportional damping force alpha M v
     linear: object = None  # a solver.linear LinearSolver, made once per run (None: "auto")
     krylov_rtol: float = 1e-8  # relative residual of iterative linear solves (inexact Newton)
     # > 0: Eisenstat-Walker forcing, the Krylov tolerance of iteration k is
@@ -66,11 +64,7 @@ class NewmarkParameters:
     # lid jam (Newton 214 -> 218, wall -20 %), 6,406 -> 3,258 over the 30-grain lid cycle (same force
     # curve to 5e-7; docs/linear-solvers.md)
     krylov_forcing: float = 0.1
-    line_search: bool = False  # backtrack on the incremental potential (IPC's merit) while the update is large
-    ccd: str = "global"  # Newton update bound: "global" (one bound for all pairs) or "pairwise" (contact.ccd)
-    accuracy: float = 0.0  # > 0: converged when a1 |dx| <= accuracy |g| (the step's own accuracy); 0: strict test
     trace: object = None  # callable(iteration, residual / tolerance, correction / tolerance, alpha): diagnostics
-    update: str = "rigid"  # "rigid": each grain's rigid part as a finite rotation (model.motion); "linear": x + alpha dx
     stall_share: float = 0.5  # share of a full update taken when Newton stalls or cycles (from the 4th iteration)
     # A stalled iteration (from the 4th) also ends when its residual is within stall_rtol of the residual
     # tolerance and its correction below stall_xtol of the step's displacement (floor: 1e-9 grain sizes;
@@ -90,7 +84,7 @@ class NewmarkParameters:
     # phase finds twinning a record outside the frozen set is held out (contact.model._with_frozen):
     # an edge-edge record at its edge's end beside its end vertex's vertex-face record doubled that
     # spot's force at every other iterate and stalled a settling 110-grain pack at steps of 1e-7 s.
-    freeze_cycles: bool = True
+    freeze_cycles: bool = default("freeze_cycles")
     # A pair that sticks at the step's start is judged by mu_s, and its force drops from mu_s F_N to
     # mu_d F_N where the trial force passes mu_s F_N. Where the drop pulls the trial force back below
     # mu_s F_N the law has no root: Newton flips the pair between stick and slip every iterate or two
@@ -99,19 +93,19 @@ class NewmarkParameters:
     # With break_stick_cycles a pair that has flipped three times in a step (not counting the first
     # update's, the predictor's miss) is held to mu_d for the rest of it: its static friction broke,
     # and the pair goes on as one that slid (continuous at mu_d F_N).
-    break_stick_cycles: bool = True
+    break_stick_cycles: bool = default("break_stick_cycles")
     # A pair whose normal damping switched on and off at three iterates of a step (not counting the
     # first update's) is undamped for the rest of it: at the outer edge of the layer the damping,
     # 2 zeta sqrt(k m) |g_n dot| with k -> 0 like (gbar - g), outweighs the elastic force by 1e5,
     # and the no-adhesion clamp F_N = max(f_n + F_d, 0) is a kink Newton crossed both ways every
     # other iterate until its 15 iterations ran out (all three Newton rejections traced in the
     # 515-grain collapse; docs/dynamics.md). Taking a pair's damping away never adds energy.
-    hold_damping_cycles: bool = True
+    hold_damping_cycles: bool = default("hold_damping_cycles")
     # A grain whose pieces' deformation gradients all lie within this strain of its projection's
     # rotation R gets Newton's block as its reference tangent rotated by R (vem.element.evaluate):
     # 4.7-5.1 ms against 13.9-14.0 ms for the element kernel at 515 grains, a matrix off by O(strain)
     # (1e-9-1e-5 for grains at the real density), the residual exact. 0: the exact tangent always.
-    rotated_tangent: float = 1e-4
+    rotated_tangent: float = default("rotated_tangent")
 
 
 def initial_state(scene: Scene, x0=None, v0=None, t0: float = 0.0, history=None, mass_damping: float = 0.0) -> State:
@@ -143,22 +137,16 @@ class _UpdatePath:
     (centroid c, translation t, rotation phi; all 0 for the straight update) with its per-vertex
     excess over x + alpha dx."""
 
-    def __init__(self, scene: Scene, x, dx, update: str):
+    def __init__(self, scene: Scene, x, dx):
         vptr = scene.bodies.vertex_ptr
         G = scene.bodies.n_bodies
         n_walls = _n_surfaces(scene) - G
         self.x, self.dx = x, np.ascontiguousarray(dx)
-        if update == "linear":
-            self.at = lambda alpha: x + alpha * dx
-            spread = surface_displacements(dx, vptr, G)
-            self.c = self.t = self.phi = np.zeros((G, 3))
-            self.excess = np.zeros(len(dx))
-        else:
-            move = RigidRetraction(x, dx, scene.bodies.lumped, vptr)
-            self.at = move.at
-            spread = move.bounds - np.linalg.norm(move.t, axis=1)
-            self.c, self.t, self.phi = move.c, move.t, move.phi
-            self.excess = move.excess()
+        move = RigidRetraction(x, dx, scene.bodies.lumped, vptr)
+        self.at = move.at
+        spread = move.bounds - np.linalg.norm(move.t, axis=1)
+        self.c, self.t, self.phi = move.c, move.t, move.phi
+        self.excess = move.excess()
         self.trans = np.concatenate([self.t, np.zeros((n_walls, 3))])
         self.spread = np.concatenate([spread, np.zeros(n_walls)])
 
@@ -172,7 +160,7 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
     every feature pair closer than gbar + D is found and bounded by additive CCD along the
     update's path (each keeps 1 - ccd_fraction of its distance), and every other pair stays
     outside the activation layer. Otherwise pairs within the layer are bounded by additive CCD
-    and all others by contact.ccd's bound from the start ("global", or "pairwise")."""
+    and all others by contact.ccd's one bound from the start (free_distance_ratio)."""
     contact = scene.contact
     gbar = contact.law.activation_gap
     keep = 1.0 - params.ccd_fraction
@@ -194,12 +182,7 @@ def _update_share(scene: Scene, path: _UpdatePath, params, ints, floats, du, t, 
         _, near, _ = contact.pairs(path.x, t, candidates, reach=gbar + D)
         return accd_alpha(near, *nodes, keep, 1.0) if len(near) else 1.0
     none = ints[:0], floats[:0]  # the pairs within the layer are left to the additive CCD below
-    if params.ccd != "pairwise":
-        ratio = free_distance_ratio(path.trans, path.spread, *none, gbar)
-    else:
-        planes = [p for p in contact.planes if p.motion.active(t)]
-        dist = np.column_stack([plane_distances(path.x, vptr, p.point_at(t), p.normal) for p in planes]) if planes else np.zeros((0, 0))
-        ratio = pairwise_distance_ratio(path.trans, path.spread, moved, *none, candidates, gbar, margin, dist)
+    ratio = free_distance_ratio(path.trans, path.spread, *none, gbar)
     alpha = min(1.0, params.ccd_fraction * ratio)
     if len(ints):
         alpha = accd_alpha(ints, *nodes, keep, alpha)
@@ -240,43 +223,6 @@ def _default_linear():
     if not _DEFAULT_LINEAR:
         _DEFAULT_LINEAR.append(make_linear_solver("auto"))
     return _DEFAULT_LINEAR[0]
-
-
-class _IncrementalPotential:
-    """E(x) = a1/2 (x - x~)^T M (x - x~) + W_int(x) + Phi_c(x) - f_g . x, x~ = x_n + dt v_n +
-    dt^2 (1/2 - beta) a_n: its gradient is the Newmark residual without the dissipative terms, so a
-    backtracking line search on it damps Newton's overshoot into the barrier (as in IPC)."""
-
-    def __init__(self, scene, state, dt, a1, beta, f_grav, t1, candidates, frozen=None):
-        self.scene, self.a1, self.f_grav, self.t1, self.candidates = scene, a1, f_grav, t1, candidates
-        self.x_tilde = (state.x + dt * state.v + dt * dt * (0.5 - beta) * state.a).ravel()
-        self.M = scene.mass_matrix()
-        self.frozen = frozen  # Newton's frozen pairs (NewmarkParameters.freeze_cycles)
-
-    def value(self, x, strain_energy=None, contact_energy=None) -> float:
-        s = self.scene
-        if strain_energy is None:
-            strain_energy = s.bodies.evaluate(x, force=False).total_energy
-        if contact_energy is None:
-            contact_energy = s.contact.potential(x, self.t1, self.candidates, self.frozen)
-        r = x.ravel() - self.x_tilde
-        return 0.5 * self.a1 * float(r @ (self.M @ r)) + strain_energy + contact_energy - float(self.f_grav @ x.ravel())
-
-    def backtrack(self, moved, alpha, e0, slope, halvings: int = 6) -> float:
-        """Largest alpha 2^-k with an Armijo decrease; alpha itself when the direction does not
-        descend (dissipative terms dominate) or no trial decreases E (round-off near convergence)."""
-        if not slope < 0:
-            return alpha
-        trial = alpha
-        for _ in range(halvings):
-            try:
-                e = self.value(moved(trial))
-            except (InvertedElementError, PenetrationError):
-                e = np.inf
-            if e <= e0 + 1e-4 * trial * slope:
-                return trial
-            trial *= 0.5
-        return alpha
 
 
 def wall_time(scene: Scene, x, tw: float, t1: float, share: float) -> float:
@@ -369,24 +315,22 @@ def _search_and_predict(scene: Scene, state: State, dt: float, t1: float, params
     # search once per step, widened by twice the predicted travel so that pairs the step closes in on
     # are candidates from the start (without it, a grain could only creep towards the gap)
     motion = state.v * dt + 0.5 * dt * dt * state.a
-    if params.predictor == "rigid":
-        # the travel the predictor takes: each grain's rigid part. Flexible grains that start
-        # undeformed under a load have vertex accelerations of 1e9 m/s^2 (an elastic vibration of
-        # 1e-7 s, not the step's motion): taken whole, the first 1e-5 s step from the 515-grain lid
-        # jam searched 0.28 m around every grain (all 132,355 grain pairs; docs/dynamics.md)
-        motion = rigid_part(state.x, motion, scene.bodies.lumped, scene.bodies.vertex_ptr)
+    # the travel the predictor takes: each grain's rigid part. Flexible grains that start
+    # undeformed under a load have vertex accelerations of 1e9 m/s^2 (an elastic vibration of
+    # 1e-7 s, not the step's motion): taken whole, the first 1e-5 s step from the 515-grain lid
+    # jam searched 0.28 m around every grain (all 132,355 grain pairs; docs/dynamics.md)
+    motion = rigid_part(state.x, motion, scene.bodies.lumped, scene.bodies.vertex_ptr)
     travel = np.sqrt(np.max(np.sum(motion**2, axis=1), initial=0.0))
     # (4 travel + gbar: room for Newton's first updates, which carry the whole step's motion, so
     # that _update_share can bound every pair they bring near by additive CCD)
     margin = 4.0 * travel + contact.law.activation_gap
     candidates = contact.search(state.x, t1, margin=margin)
+    # the first iterate: each grain's rigid part of its constant-acceleration motion (no elastic
+    # noise), bounded against the walls where they stand (they may already be past a grain at t1)
     x = state.x.copy()
-    if params.predictor in ("acceleration", "rigid"):
-        guess = motion  # for "rigid" each grain's rigid part of it only (no elastic noise)
-        # bounded against the walls where they stand (they may already be past a grain at t1)
-        _, ints0, floats0 = contact.pairs(state.x, state.t, candidates)
-        path = _UpdatePath(scene, x, guess, params.update)
-        x = path.at(_update_share(scene, path, params, ints0, floats0, guess * 0, state.t, candidates, margin))
+    _, ints0, floats0 = contact.pairs(state.x, state.t, candidates)
+    path = _UpdatePath(scene, x, motion)
+    x = path.at(_update_share(scene, path, params, ints0, floats0, motion * 0, state.t, candidates, margin))
     return candidates, margin, x
 
 
@@ -411,7 +355,6 @@ def _newton(scene: Scene, state: State, x: np.ndarray, dt: float, t1: float, k: 
     corrections = []
     frozen, key_trail = None, []
     held = HeldPairs(params.break_stick_cycles, params.hold_damping_cycles)
-    g_norm = float(np.linalg.norm(scene.gravity)) or 9.81
     eta = params.krylov_forcing
     shift = a1 + params.mass_damping * a4  # the Newton matrix's mass term: K + shift M
     tangent_blocks = exact_blocks = 0
@@ -441,7 +384,7 @@ def _newton(scene: Scene, state: State, x: np.ndarray, dt: float, t1: float, k: 
         eta = _forcing(params, eta, corrections[-1][1] if corrections else None, r_norm)
         dx = -linear.solve(R + drive, eta).reshape(-1, 3)
         krylov += linear.stats.last_iterations
-        path = _UpdatePath(scene, x, dx, params.update)
+        path = _UpdatePath(scene, x, dx)
         alpha = _update_share(scene, path, params, cr.ints, cr.floats, du, tw, candidates, margin)
         # A pair that changes type or eligibility between iterations (a vertex crossing a face's
         # edge) changes the tangent discontinuously, and full updates can cycle between two states
@@ -452,17 +395,10 @@ def _newton(scene: Scene, state: State, x: np.ndarray, dt: float, t1: float, k: 
         r_tol = params.rtol * scale
         du_max, dx_floor = np.abs(du).max(), 1e-12 * size
         dx_tol = max(params.xtol * du_max, dx_floor)
-        if params.accuracy > 0:
-            dx_tol = max(dx_tol, params.accuracy * g_norm / a1)
         if (at_end and it >= 4 and alpha == 1.0 and dx_norm > max(0.5 * corrections[-2][0], dx_tol)
                 and r_norm > 0.5 * corrections[-2][1]):  # fmt: skip
             alpha = params.stall_share
         corrections.append((dx_norm, r_norm))
-        # only while the update is far above what the convergence test asks (1e3 dx_tol): near
-        # convergence the merit's round-off would stall it
-        if params.line_search and dx_norm > 1e3 * dx_tol:
-            merit = _IncrementalPotential(scene, state, dt, a1, params.beta, f_grav, t1, candidates, frozen)
-            alpha = merit.backtrack(path.at, alpha, merit.value(x, el.total_energy, cr.energy), float(R @ dx.ravel()))
         x = path.at(alpha)
         if not at_end:
             # dx answers the walls' whole way to t1 (the drive): a shortened update takes them the

@@ -48,6 +48,7 @@ from ..contact.forces import rigid_pair_blocks
 from ..contact.model import PenetrationError
 from ..model.scene import Scene
 from .cycles import HeldPairs
+from .defaults import RIGID_NEWTON_ITERATIONS, default
 from .explicit import ExplicitParameters
 from .linear.direct import superlu
 from .rigid import RigidExplicit, _force_and_torque, angular_velocity, free_rotation
@@ -92,10 +93,12 @@ class RigidNewmark(RigidExplicit):
     easy_iterations = 6
     grow = 1.5
 
-    def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters(), beta: float = 0.3025,
-                 gamma: float = 0.6, max_iterations: int = 25, tolerance: float = 1e-6,
-                 break_stick_cycles: bool = True, hold_damping_cycles: bool = True):  # fmt: skip
-        """break_stick_cycles, hold_damping_cycles: the flexible integrator's rules for a pair whose
+    def __init__(self, scene: Scene, params: ExplicitParameters = ExplicitParameters(), beta: float = default("beta"),
+                 gamma: float = default("gamma"), max_iterations: int = RIGID_NEWTON_ITERATIONS, tolerance: float = 1e-6,
+                 break_stick_cycles: bool = default("break_stick_cycles"),
+                 hold_damping_cycles: bool = default("hold_damping_cycles")):  # fmt: skip
+        """beta, gamma, max_iterations and the two rules: `[solver]` keys (config/tables.py; Newton's
+        budget here RIGID_NEWTON_ITERATIONS where `max_iterations` is not set). break_stick_cycles, hold_damping_cycles: the flexible integrator's rules for a pair whose
         friction flips between stick and slip, or whose damping switches on and off, at three
         iterates of a step (solver/newmark.py NewmarkParameters): the law has no root there, and
         halving the step does not remove a jump of the force."""

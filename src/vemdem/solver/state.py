@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..contact.model import ContactHistory
+from .defaults import default
 
 
 class StepRejected(RuntimeError):
@@ -62,21 +63,23 @@ class StepInfo:
 
 @dataclass
 class StepControl:
-    """Adaptive step (docs/dynamics.md): halve on rejection, grow after easy steps."""
+    """Adaptive step (docs/dynamics.md): halve on rejection, grow after easy steps. The defaults
+    are the `[solver]` keys' (config/tables.py)."""
 
-    dt: float = 1e-5
-    dt_min: float = 1e-10
-    dt_max: float = 1e-4
+    dt: float = default("dt")
+    dt_min: float = default("dt_min")
+    dt_max: float = default("dt_max")
     grow: float = 1.5
     # a step is "easy" when Newton converged in at most this many iterations: settling packs need
     # 5-8 on the barrier law, so a smaller bound never let the step grow back after a rejection
     # (measured with benchmarks/bench_dynamics.py, docs/dynamics.md)
-    easy_iterations: int = 8
-    grow_after: int = 3
+    easy_iterations: int = default("easy_iterations")
+    grow_after: int = default("grow_after")
     easy_streak: int = 0  # state: consecutive easy steps so far (kept here so a resumed run continues exactly)
-    impact_steps: float = 0.0  # > 0: contact-impact step control on (docs/dynamics.md, contact.ccd)
-    entry_fraction: float = 0.05  # implicit: share of the activation gap an approaching pair may close per step
-    energy_growth: float = 1e-3  # implicit: largest energy gain of a step, in sum m g d (0: off; newmark.advance)
+    impact_steps: float = default("impact_steps")  # > 0: contact-impact step control on (docs/dynamics.md)
+    # implicit, impact control: share of the activation gap an approaching pair may close per step
+    entry_fraction: float = default("entry_fraction")
+    energy_growth: float = default("energy_growth")  # implicit: largest energy gain of a step, in sum m g d (0: off)
 
 
 @dataclass

@@ -71,9 +71,6 @@ def block_diagonal_mass(blocks: np.ndarray, block_ptr: np.ndarray, vertex_ptr: n
     data = np.repeat(blocks, 3)[order]
     return sp.csr_matrix(sp.coo_matrix((data, (rows[order], cols[order])), shape=(size, size)))
 
-    def total(self) -> float:
-        return float(self.lumped.sum())
-
 
 def projection_mass(grain: Polyhedron, density: float) -> np.ndarray:
     n = grain.n_vertices

@@ -11,7 +11,7 @@ One compiled kernel evaluates energy, nodal forces and the 12 x 12 tangent of ev
 tetrahedron in parallel; the global residual and sparse tangent are assembled with a
 scatter map computed once (the CSR pattern of the mesh), so no Python loop visits a tet.
 
-`compress_fem` and `compress_vem` run the plate compression of
+`run_fem` and `compress_vem` run the plate compression of
 `vemdem.scenarios.grain_compression` (same grain orientation, plates, pins and Newton
 solver, `scenarios.plates.compress`) on the FE mesh and on the one-element VEM, so that
 the two force-strain curves differ only by the discretisation. In the FE model the plates
@@ -388,7 +388,11 @@ def _tracker(nodes: np.ndarray, plates: PlateSetup, log: list):
 
 def run_fem(grain: Polyhedron, material: Material, strains, mode: str = "uniaxial", max_volume: float | None = None,
             rtol: float = 1e-9, max_iter: int = 40, graded: bool = True) -> CompressionRun:  # fmt: skip
-    """Plate compression of the FE model of the grain (see `compress_fem`)."""
+    """Plate compression of the FE model of the grain: the forces on the top plate at each strain
+    for a TetGen mesh of it. strains are the loaded steps (increasing; steps of a few % at most);
+    max_volume bounds the tetrahedra (default V / 1000) and, for the graded family
+    (`reference_mesh`), sets every size. Same plates, pins and orientation as the
+    grain_compression scenario; the plates hold every mesh node on the grain's flat caps."""
     t0 = time.perf_counter()
     if max_volume is None:
         max_volume = 1e-3 * grain.volume
@@ -420,17 +424,6 @@ def run_vem(grain: Polyhedron, material: Material, beta_internal: float, strains
     forces, its = compress(body_assembler(bodies), X, plates, strains, force_scale, rtol=rtol, max_iter=max_iter,
                            on_step=_tracker(X, plates, pen))  # fmt: skip
     return CompressionRun(np.asarray(strains, float), forces, len(X), 1, its, time.perf_counter() - t0, np.array(pen))
-
-
-def compress_fem(grain: Polyhedron, material: Material, strains, mode: str = "uniaxial",
-                 max_volume: float | None = None, rtol: float = 1e-9, graded: bool = True) -> np.ndarray:  # fmt: skip
-    """Forces on the top plate at each strain for a TetGen mesh of the grain.
-
-    strains are the loaded steps (increasing; steps of a few % at most); max_volume bounds the
-    tetrahedra (default V / 1000) and, for the graded family (`reference_mesh`), sets every
-    size. Same plates, pins and orientation as the grain_compression scenario; the plates hold
-    every mesh node on the grain's flat caps."""
-    return run_fem(grain, material, strains, mode, max_volume, rtol, graded=graded).forces
 
 
 def compress_vem(grain: Polyhedron, material: Material, beta_internal: float, strains,

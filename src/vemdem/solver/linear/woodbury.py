@@ -27,14 +27,15 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from ..defaults import default
 from .lapack import _DOUBLE, _GETRF
 from .modes import rigid_modes
 
-# Grains whose contacts touch more dofs than this take the LU ([solver] woodbury_dofs; T holds
+# Grains whose contacts touch more dofs than this take the LU (`[solver] woodbury_dofs`, its default; T holds
 # whole vertices, so k counts in threes). benchmarks/bench_woodbury.py, 515 grains of 30 vertices,
 # 2 threads: the factorisation 0.48 of the LU's at k = 21, 0.79 at 33, 0.97 at 39, 1.22 at 48; one
 # application 0.76, 1.04, 1.12, 1.27 (docs/linear-solvers.md).
-WOODBURY_MAX_DOFS = 36
+WOODBURY_MAX_DOFS = default("woodbury_dofs")
 
 
 BASIS_BATCH = 1024  # grains per batched eigh in modal_basis (about 330 MB of temporaries at 90 dofs)

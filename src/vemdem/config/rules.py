@@ -1,0 +1,97 @@
+"""The cross-field rules: the checks that tie several keys of a config together, run after each
+key passed its own (scenarios/registry.checked_config). Each raises a ConfigError naming the key."""
+
+from __future__ import annotations
+
+from .checks import MAX_FRAMES, NEWTON_ITERATIONS
+from .schema import ConfigError
+
+
+def _check_selective_scaling(cfg: dict) -> None:
+    """A number for selective mass scaling needs flexible grains on the explicit step ("auto" is 0
+    elsewhere: nothing to scale)."""
+    solver, model = cfg.get("solver"), cfg.get("model")
+    if not (isinstance(solver, dict) and isinstance(solver.get("selective_mass_scaling"), float)):
+        return
+    if solver["selective_mass_scaling"] > 0 and solver.get("integrator") != "explicit":
+        raise ConfigError("solver.selective_mass_scaling: scales the explicit step's mass; set solver.integrator = "
+                          '"explicit" (or "auto" or 0)')  # fmt: skip
+    if solver["selective_mass_scaling"] > 0 and isinstance(model, dict) and model.get("grains") == "rigid":
+        raise ConfigError('solver.selective_mass_scaling: rigid grains have no deformation modes to scale ("auto" or 0)')
+
+
+def check_rules(cfg: dict) -> None:
+    """Rules that tie several keys together; each raises a ConfigError naming the key."""
+    contact = cfg.get("contact")
+    if isinstance(contact, dict) and contact.get("mu_d") is not None and contact["mu_d"] > contact["mu_s"]:
+        raise ConfigError(f"contact.mu_d: must not exceed contact.mu_s ({contact['mu_s']:g}), got {contact['mu_d']:g} "
+                          "(its default where not set: give both)")  # fmt: skip
+    pack = cfg.get("pack")
+    if isinstance(pack, dict) and "mu_d" in pack and pack["mu_d"] > pack["mu_s"]:
+        raise ConfigError(f"pack.mu_d: must not exceed pack.mu_s ({pack['mu_s']:g}), got {pack['mu_d']:g} "
+                          "(its default where not set: give both)")  # fmt: skip
+    settle = cfg.get("settle")
+    if isinstance(settle, dict) and "min_time" in settle and "max_time" in settle:
+        if settle["min_time"] > settle["max_time"]:
+            raise ConfigError(f"settle.min_time: must not exceed settle.max_time ({settle['max_time']:g} s), "
+                              f"got {settle['min_time']:g}")  # fmt: skip
+    solver = cfg.get("solver")
+    _check_selective_scaling(cfg)
+    if isinstance(solver, dict) and "dt_min" in solver and "dt_max" in solver:
+        if solver["dt_min"] > solver["dt_max"]:
+            raise ConfigError(f"solver.dt_min: must not exceed solver.dt_max ({solver['dt_max']:g}), got {solver['dt_min']:g}")
+        if solver["dt"] < solver["dt_min"]:
+            raise ConfigError(f"solver.dt: must not be below solver.dt_min ({solver['dt_min']:g}), got {solver['dt']:g}")
+    if isinstance(solver, dict) and "easy_iterations" in solver and "max_iterations" in solver:
+        limit = NEWTON_ITERATIONS if solver["max_iterations"] is None else solver["max_iterations"]
+        if solver["easy_iterations"] > limit:
+            raise ConfigError(f"solver.easy_iterations: must not exceed solver.max_iterations ({limit}), "
+                              f"got {solver['easy_iterations']}")  # fmt: skip
+    tilt = cfg.get("tilt")
+    if isinstance(tilt, dict) and "start" in tilt and "max" in tilt and tilt["start"] >= tilt["max"]:
+        raise ConfigError(f"tilt.start: must be below tilt.max ({tilt['max']:g} degrees), got {tilt['start']:g}")
+    gravity = cfg.get("gravity")
+    if isinstance(tilt, dict) and isinstance(gravity, list) and (gravity[0] != 0 or gravity[1] != 0 or gravity[2] >= 0):
+        raise ConfigError(f"gravity: the tilting box turns gravity from straight down; give [0, 0, -g], got "
+                          f"{[float(v) for v in gravity]}")  # fmt: skip
+    _check_frames(cfg)
+    _check_every_within_run(cfg)
+    lid = cfg.get("lid")
+    if isinstance(lid, dict) and "end" in lid and lid["end"] >= lid["start"]:
+        raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
+
+
+def _check_frames(cfg: dict) -> None:
+    every = cfg.get("output", {}).get("every")
+    if every is None:
+        return
+    duration = cfg.get("duration") or cfg.get("settle", {}).get("max_time")
+    if duration is None:
+        return
+    frames = duration / every
+    if frames > MAX_FRAMES:
+        raise ConfigError(f"output.every: {every:g} s writes {frames:.3g} frames over {duration:g} s "
+                          f"(at most {MAX_FRAMES:,}); choose a larger interval")  # fmt: skip
+
+
+# the scenarios that run for settle.max_time (the others add a tilt, a lift or load stages to it)
+SETTLE_IS_DURATION = ("pack", "pile_collapse")
+
+
+def _run_length(cfg: dict) -> tuple[str, float] | None:
+    """(key, seconds) of the simulated time a run lasts where one key fixes it, else None."""
+    if "duration" in cfg:
+        return "duration", cfg["duration"]
+    if cfg.get("scenario") in SETTLE_IS_DURATION and "max_time" in cfg.get("settle", {}):
+        return "settle.max_time", cfg["settle"]["max_time"]
+    return None
+
+
+def _check_every_within_run(cfg: dict) -> None:
+    """A frame interval longer than the run: the loop would cut its only frame to the run's end, so
+    the interval asked for is never the one written (a slip of units or of keys)."""
+    every = cfg.get("output", {}).get("every")
+    length = _run_length(cfg)
+    if every is not None and length is not None and every > length[1]:
+        key, seconds = length
+        raise ConfigError(f"output.every: must not exceed {key} ({seconds:g} s), got {every:g}")
