@@ -182,7 +182,7 @@ def _settle_replaced(out: Path, restore: bool) -> None:
 
 
 COMPILE_NOTICE = "vemdem: compiling the numerical kernels (once per install, about {minutes}) ..."
-COMPILE_MINUTES = "two minutes"  # the main job's first run on a 2-core VM (README)
+COMPILE_MINUTES = "a minute or two"  # 76 s of CPU for the main job's kernels on a 2-core VM (README)
 
 
 def _compile_notice(quiet: bool):
