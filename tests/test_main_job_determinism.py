@@ -73,7 +73,8 @@ def _run_bits(cfg, out) -> dict:
     return {name: state[name].tobytes() for name in state.files}
 
 
-@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread only on this machine")
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2,
+                    reason="numba has one thread here (one core, or NUMBA_NUM_THREADS=1)")  # fmt: skip
 def test_one_thread_and_two_give_the_same_heap(tmp_path):
     """The parallel kernels compute each pair's or grain's result on its own (fixed chunks, not one
     per thread) and add the results into shared arrays serially, so the thread count changes no
