@@ -25,8 +25,7 @@ ALLOWED = {
     "scenarios": {"config", "driver", "solver.api", "solver.statics", "solver.state", "model", "geometry", "io",
                   "analysis", "contact.walls"},  # fmt: skip
     "verification": {"solver", "model", "vem", "geometry", "scenarios.plates", "contact.defaults"},
-    # vem.element: only to ask numba's cache whether the element kernels are compiled (the compile notice)
-    "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep", "vem.element"},
+    "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep"},
     "sweep": {"config", "scenarios.registry", "analysis.seeds"},
 }
 # finer rules inside a room

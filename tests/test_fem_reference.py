@@ -1,5 +1,5 @@
 """The tetrahedral FE reference (verification/fem_reference.py) and the VEM-vs-FE comparison of
-single-grain compression (issue: beta_i in {0.1, 0.25, 0.5} at 5, 10 and 20 % strain).
+single-grain compression (stabilisation beta_i in {0.1, 0.25, 0.5} at 5, 10 and 20 % strain).
 
 Full numbers, finer meshes and several seeds: benchmarks/fem_comparison.py, docs/fem_comparison.md.
 """

@@ -17,8 +17,12 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
+import re
+import shlex
 import shutil
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -324,3 +328,72 @@ def test_the_tables_name_shipped_examples():
     assert set(REDUCTIONS) <= set(EXAMPLES), sorted(set(REDUCTIONS) - set(EXAMPLES))
     assert set(AFTER_PACK) | set(UPSTREAM) <= set(REDUCTIONS)
     assert {source for source, _ in UPSTREAM.values()} <= set(EXAMPLES)
+
+
+# -------------------------------------------------------------------------------- the page's commands
+GALLERY = Path(__file__).resolve().parents[1] / "docs" / "gallery.md"
+# the scenarios that write DIR/state.npz (the start of another run); a run with a pack stage also
+# writes DIR/pack/state.npz
+STATE_WRITERS = {"pack", "pile_collapse", "poured_heap", "tilting_box"}
+# the examples the gallery shows without a picture, and says so
+NO_PICTURE = {"drop", "paper-pack", "paper-pack-implicit"}
+
+
+def gallery_commands(text: str) -> list[list[str]]:
+    """Each command of the page's bash blocks, split as the shell splits it (`&&` chains apart,
+    comments dropped); the generic `NAME` line is a pattern, not a command."""
+    commands = []
+    for block in re.findall(r"```bash\n(.*?)```", text, re.S):
+        for line in block.splitlines():
+            words = shlex.split(line, comments=True)
+            while words and "NAME" not in words:
+                cut = words.index("&&") if "&&" in words else len(words)
+                command, words = words[:cut], words[cut + 1 :]
+                commands.append([Path(command[0]).name, *command[1:]])
+    return commands
+
+
+def test_the_gallery_commands_chain_as_written():
+    """Run in one folder in the page's order, each command finds what it reads: a `vemdem run`
+    a config an earlier `vemdem example` wrote, its `initial_state` (relative to the config) a state
+    file an earlier run wrote, and an --out folder no earlier run used (which it would refuse)."""
+    configs: dict[str, str] = {}  # config file -> the example written into it
+    written: set[str] = set()  # state files the runs so far wrote
+    used: set[str] = set()
+    ran = []
+    for words in gallery_commands(GALLERY.read_text()):
+        if words[:2] == ["vemdem", "example"] and len(words) == 5 and words[3] == ">":
+            assert words[2] in EXAMPLES, f"gallery: no example {words[2]!r}"
+            configs[words[4]] = words[2]
+        elif words[:2] == ["vemdem", "run"]:
+            config, out = words[2], Path(words[words.index("--out") + 1]).as_posix()
+            assert config in configs, f"gallery: `vemdem run {config}` before a command writes {config}"
+            assert out not in used, f"gallery: two runs write --out {out}"
+            used.add(out)
+            raw = tomllib.loads(example_text(configs[config]))
+            if raw.get("initial_state"):
+                start = os.path.normpath(Path(config).parent / raw["initial_state"])
+                assert start in written, (f"gallery: {configs[config]} starts from {start}, which no earlier "
+                                          f"command writes (written: {sorted(written)})")  # fmt: skip
+            if raw["scenario"] in STATE_WRITERS:
+                written.add(os.path.normpath(f"{out}/state.npz"))
+            if pack_stage(raw) is not None:
+                written.add(os.path.normpath(f"{out}/pack/state.npz"))
+            ran.append(configs[config])
+    assert sorted(ran) == sorted(EXAMPLES), "gallery: every example runs once, in a block of its own"
+
+
+def test_the_gallery_shows_every_example_with_its_picture_or_says_it_has_none():
+    text = GALLERY.read_text()
+    sections = dict(re.findall(r"^### `([a-z_-]+)`\n(.*?)(?=^##)", text + "\n##", re.S | re.M))
+    assert set(sections) == set(EXAMPLES)
+    for name, section in sections.items():
+        pictures = re.findall(r"!\[[^\]]*\]\((img/[^)]+)\)", section)
+        if name in NO_PICTURE:
+            assert not pictures and "No picture" in " ".join(section.split()), name
+        else:
+            assert pictures, f"gallery: {name} has no picture; add one, or add it to NO_PICTURE and say so"
+            for picture in pictures:
+                assert (GALLERY.parent / picture).is_file(), picture
+    for name in NO_PICTURE:
+        assert f"`{name}`" in text.split("## The first runs")[0], f"the gallery's introduction names {name}"

@@ -1,4 +1,5 @@
-"""Grain geometry: validation (issue test 8), mass properties, generator, import, sub-mesh."""
+"""Grain geometry: validation of a grain's surface (each defect refused with the grain's name), mass
+properties, the seeded generator, import from surface files, the stabilisation sub-mesh."""
 
 import meshio
 import numpy as np

@@ -1,4 +1,5 @@
-"""Single-grain compression (issue test 6) and the grain_compression job's outputs."""
+"""Single-grain compression against the closed form of a compressed cube, and the
+grain_compression job's outputs."""
 
 import csv
 import json

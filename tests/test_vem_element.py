@@ -1,4 +1,6 @@
-"""The virtual element of one grain (paper section 2.1, eq. 2-8): issue tests 1, 2, 3 and 5."""
+"""The virtual element of one grain (paper section 2.1, eq. 2-8): no energy in a rigid motion, a
+homogeneous deformation reproduced, the force the gradient of the energy and the tangent the
+derivative of the force, a tetrahedral grain the linear tetrahedron."""
 
 import numpy as np
 import pytest

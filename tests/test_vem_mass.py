@@ -1,4 +1,5 @@
-"""Mass matrix and gravity load of the blended element (issue test 4)."""
+"""Mass matrix and gravity load of the blended element: rigid-body inertia, symmetry and rank,
+the weight at the centroid, the lumped mass."""
 
 import numpy as np
 import pytest

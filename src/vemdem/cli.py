@@ -33,7 +33,7 @@ from . import sweep
 from .config import ConfigError, load_toml
 from .driver.checkpoint import CheckpointError, checkpoint_books
 from .driver.loop import InitialStateError
-from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_text
+from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_line, example_text
 
 # what a run writes into --out: --overwrite removes these and nothing else
 KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "history.csv", "grains.csv", "walls.csv",
@@ -181,22 +181,35 @@ def _settle_replaced(out: Path, restore: bool) -> None:
         shutil.rmtree(aside, ignore_errors=True)
 
 
-def _kernels_compiled() -> bool:
-    """Whether numba's cache holds the element kernels for this machine's target and these sources,
-    as numba itself reads its index (beside the sources, or in NUMBA_CACHE_DIR). An index for
-    another CPU target (an install compiled natively before vemdem.portable pinned the target) or
-    for older sources means a compile ahead. A cache this reading does not understand counts as
-    compiled: the notice is a courtesy, and a false one would be worse than a missing one."""
-    from numba.core.registry import cpu_target
+COMPILE_NOTICE = "vemdem: compiling the numerical kernels (once per install, about {minutes}) ..."
+COMPILE_MINUTES = "a minute or two"  # 76 s of CPU for the main job's kernels on a 2-core VM (README)
 
-    from .vem import element
 
-    try:
-        overloads = element._evaluate_grains._cache._cache_file._load_index()  # numba's own freshness checks
-        target = cpu_target.target_context.codegen().magic_tuple()
-        return any(key[1] == target for key in overloads)
-    except Exception:  # noqa: BLE001 - numba's private layout: any surprise means "do not warn"
-        return True
+def _compile_notice(quiet: bool):
+    """A context in which the first kernel numba really compiles says so, once: numba announces a
+    compile (its "numba:compile" event) only when its cache has no kernel for these sources and
+    this CPU target, so a cached install says nothing, and a mistake found before the first kernel
+    runs (a missing grain file) is answered in its own line, not after a promise of minutes."""
+    from contextlib import nullcontext
+
+    if quiet:
+        return nullcontext()
+    from numba.core import event
+
+    class Notice(event.Listener):
+        said = False
+
+        def on_start(self, _event):
+            if not self.said:
+                self.said = True
+                from tqdm import tqdm
+
+                tqdm.write(COMPILE_NOTICE.format(minutes=COMPILE_MINUTES), file=sys.stderr)  # above a progress bar
+
+        def on_end(self, _event):
+            pass
+
+    return event.install_listener("numba:compile", Notice())
 
 
 # the errors that carry their own cause in words: vemdem's (TimeStepTooSmall names the last rejected
@@ -238,12 +251,11 @@ def cmd_run(args) -> int:
     except ConfigError as exc:
         print(f"vemdem: config error: {exc}", file=sys.stderr)
         return 2
-    # after the checks: a mistake is answered in its one line, not after a promise of minutes
-    if not args.quiet and not _kernels_compiled():
-        print("vemdem: compiling the numerical kernels (once per install, one to two minutes) ...", file=sys.stderr)
     try:
         kwargs = {"resume": True} if args.resume else {}
-        summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet), **kwargs)
+        with _compile_notice(args.quiet):
+            summary = module.run(cfg, args.out, base_dir=args.config.parent, progress=_progress_bar(args.quiet),
+                                 **kwargs)  # fmt: skip
     except (ConfigError, CheckpointError, InitialStateError) as exc:
         _settle_replaced(args.out, restore=True)
         _remove_if_empty(args.out, created)
@@ -267,13 +279,17 @@ def cmd_run(args) -> int:
         return 1
     _settle_replaced(args.out, restore=False)
     if not args.quiet:
+        headline = getattr(module, "headline", None)  # a scenario's measure in one line (pile_collapse: the angle)
+        if headline is not None:
+            print(f"{cfg['scenario']}: {headline(summary)}")
         print(f"{cfg['scenario']}: done in {summary['wall_seconds']:.1f} s; results in {args.out}")
     return 0
 
 
 def cmd_example(args) -> int:
     if args.name is None:
-        print("\n".join(EXAMPLES))
+        width = max(map(len, EXAMPLES))
+        print("\n".join(f"{name:<{width}}  {example_line(name)}" for name in EXAMPLES))
         return 0
     try:
         sys.stdout.write(example_text(args.name))

@@ -301,16 +301,26 @@ def rose_histograms(normals, bins: int = ROSE_BINS) -> dict:
             "elevation_edges": e_edges, "elevation_density": e_counts / max(len(both), 1) / band}  # fmt: skip
 
 
+# what the marks mean, under the figure: a rose read without it looks like a plain histogram
+ROSE_CAPTION = ("Roses: the density of contact normals per direction (each normal counted with its opposite), "
+                "1 for an isotropic fabric (dashed circle);\nazimuth weighted by the normal's horizontal part, "
+                "elevation per band of the sphere's area. Right: the normal forces over their mean "
+                "(dashed line: the mean).")
+
+
 def plot_fabric_rose(path: Path, frames) -> None:
     """fabric_rose.png: one row per frame (label, normals (C, 3), fn (C,)), each with the rose of
     the normals' azimuth (xy plane) and elevation (rose_histograms; the dashed circle: isotropic)
-    and the distribution of f_n / <f_n> (log scale). Agg, no pyplot: no global backend for the
-    driver to set."""
+    and the distribution of f_n / <f_n> (log scale); the row's label above it, and a caption that
+    says what the marks are. Agg, no pyplot: no global backend for the driver to set."""
     from matplotlib.figure import Figure  # here: a run that draws nothing does not load matplotlib
 
     frames = list(frames)
     rows = max(len(frames), 1)
-    fig = Figure(figsize=(10, 3.3 * rows), dpi=100)
+    row_height, head, foot = 3.6, 1.0, 0.75  # inches: a row, above the first (its label, titles), the caption
+    height = rows * row_height + head + foot
+    fig = Figure(figsize=(10, height), dpi=100)
+    labels = []
     for row, (label, normals, fn) in enumerate(frames):
         rose = rose_histograms(normals)
         for col, key, title, colour in ((0, "azimuth", "azimuth of the normals (xy plane)", "tab:blue"),
@@ -322,10 +332,12 @@ def plot_fabric_rose(path: Path, frames) -> None:
             ax.plot(np.linspace(edges[0], edges[-1], 73), np.ones(73), "k--", lw=0.8)
             ax.set_ylim(0.0, max(1.2, 1.05 * float(rose[f"{key}_density"].max())))
             ax.set_yticks([1.0], ["1"])
+            ax.tick_params(labelsize=8)
             if key == "elevation":
                 ax.set_thetamin(-90)
                 ax.set_thetamax(90)
-            ax.set_title(f"{label}\n{title}" if col == 0 else title, fontsize=9)
+            ax.set_title(title, fontsize=9, pad=14)  # clear of the 90 degree label
+            labels.append((row, ax, label))
         ax = fig.add_subplot(rows, 3, 3 * row + 3)
         dist = force_distribution(fn)
         if len(dist["counts"]):
@@ -334,8 +346,18 @@ def plot_fabric_rose(path: Path, frames) -> None:
             ax.axvline(1.0, color="k", lw=0.8, ls="--")
         ax.set_xlabel("f_n / <f_n>")
         ax.set_ylabel("probability density")
-        ax.set_title(f"{len(np.atleast_1d(fn))} contacts, max {dist['max_over_mean'] or 0:.2f} <f_n>", fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.set_title(f"{len(np.atleast_1d(fn))} contacts, max {dist['max_over_mean'] or 0:.2f} <f_n>", fontsize=9,
+                     pad=14)  # fmt: skip
+    fig.text(0.5, 0.12 / height, ROSE_CAPTION, ha="center", va="bottom", fontsize=8, wrap=True)
     # fixed margins: tight_layout measured every tick label of the polar axes, most of the drawing time
-    fig.subplots_adjust(left=0.04, right=0.97, bottom=0.5 / fig.get_figheight(), top=1.0 - 0.6 / fig.get_figheight(),
-                        wspace=0.35, hspace=0.6)  # fmt: skip
+    fig.subplots_adjust(left=0.06, right=0.97, bottom=(foot + 0.45) / height, top=1.0 - head / height,
+                        wspace=0.35, hspace=0.75)  # fmt: skip
+    tops: dict[int, tuple[float, str]] = {}
+    for row, ax, label in labels:  # a polar axes draws inside its box: its circle's top, not the box's
+        ax.apply_aspect()
+        top = ax.get_position(original=False).y1
+        tops[row] = (max(top, tops.get(row, (0.0, ""))[0]), label)
+    for top, label in tops.values():  # each row's label above its titles (pad, tick labels, the title)
+        fig.text(0.5, top + 0.62 / height, label, ha="center", va="bottom", fontsize=10, fontweight="bold")
     fig.savefig(path)

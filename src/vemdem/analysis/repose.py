@@ -457,6 +457,16 @@ def measure_pile(centroids: np.ndarray, x: np.ndarray, vertex_grain: np.ndarray,
     }
 
 
+def repose_headline(summary: dict) -> str:
+    """The one line a heap's run ends with: the angle with its uncertainty and the heap's height,
+    or why there is no angle."""
+    height = f"pile height {summary['pile_height'] * 1e3:.2f} mm"
+    angle = summary.get("angle_of_repose_deg")
+    if angle is None:
+        return f"no angle of repose ({summary.get('angle_of_repose_error')}); {height}"
+    return f"angle of repose {angle:.1f} +- {summary['angle_of_repose_uncertainty_deg']:.1f} deg; {height}"
+
+
 def plot_pile(result: ReposeResult, centroids: np.ndarray, path: Path, title: str = "") -> None:
     """Side view: every centroid at (distance from the axis, height), the surface profile,
     and the fitted flank. Input lengths in m, plotted in mm."""

@@ -156,6 +156,35 @@ def _default(spec: Field) -> str:
     return "not set" if spec.default is None else f"`{_value(spec.default)}`"
 
 
+# the `scenario` key of each schema: the one key whose meaning is the page's own structure
+SCENARIO_MEANING = "the kind of run: picks the schema of this section"
+
+
+def _trailing_bracket(text: str) -> int:
+    """Where the bracket that ends `text` opens (brackets may nest), or -1."""
+    if not text.endswith("]"):
+        return -1
+    depth = 0
+    for i in range(len(text) - 1, -1, -1):
+        depth += {"]": 1, "[": -1}.get(text[i], 0)
+        if depth == 0:
+            return i
+    return -1
+
+
+def meaning(key: str, spec: Field) -> str:
+    """The key's meaning as the page shows it. A bracket at the end of a doc says what a default
+    "not set" stands for (docs' convention); where a table sets a default of its own (a contact
+    table with damping_ratio = 0.05) that bracket would contradict the default column, so it goes."""
+    doc = " ".join(spec.doc.split())
+    if not doc and key == "scenario":
+        return SCENARIO_MEANING
+    start = _trailing_bracket(doc)
+    if start >= 0 and spec.default is not REQUIRED and spec.default not in (None, ""):
+        doc = doc[:start].rstrip()
+    return doc
+
+
 def _cell(text: str) -> str:
     return " ".join(str(text).split()).replace("|", "\\|")
 
@@ -166,7 +195,7 @@ def _rows(table: dict) -> list[str]:
         return []
     lines = ["| key | type | default | meaning | allowed |", "|---|---|---|---|---|"]
     for key, spec in fields:
-        cells = [f"`{key}`", _type(spec), _default(spec), spec.doc, _allowed(spec)]
+        cells = [f"`{key}`", _type(spec), _default(spec), meaning(key, spec), _allowed(spec)]
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     return lines + [""]
 

@@ -86,7 +86,8 @@ SCENE_GRAIN.update(
 )
 
 WALL = {
-    "type": Field(("plane", "mesh"), REQUIRED),
+    "type": Field(("plane", "mesh"), REQUIRED,
+                  doc="plane: an infinite plane (point, normal); mesh: a triangulated surface (file)"),
     "point": Field(list, [0.0, 0.0, 0.0], _vector_within(MAX_COORDINATE, "m"), "plane: a point on it (m)"),
     "normal": Field(list, [0.0, 0.0, 1.0], vector3, "plane: normal pointing towards the grains"),
     "file": Field(str, "", doc="mesh: surface file (STL/OBJ/PLY), relative to the config file"),
@@ -120,12 +121,18 @@ CONTACT = {
     "reference_force": Field(float, None, positive, "N, force per contact at the switch gap, for loads far above "
                              "the weight (a lid: its force over its contacts) [10 grain weights]"),
     "penalty": Field(float, None, positive, "eps1 [from the reference force at the switch gap]"),
-    "switch_factor": Field(float, None, _in(1e-3, 1, hi_open=True)),
-    "penalty_exponent": Field(float, None, _in(1, 10)),
-    "barrier_exponent": Field(float, None, _in(-10, -1, hi_open=True)),
+    "switch_factor": Field(float, None, _in(1e-3, 1, hi_open=True),
+                           "the switch gap as a fraction of the activation gap: the penalty acts above it, the "
+                           "barrier below (docs/contact.md) [0.3]"),
+    "penalty_exponent": Field(float, None, _in(1, 10),
+                              "n1: above the switch gap the force is eps1 (gbar - g)^n1, gbar the activation gap [2]"),
+    "barrier_exponent": Field(float, None, _in(-10, -1, hi_open=True),
+                              "n2: below the switch gap the force grows as g^n2, without bound as the gap g "
+                              "closes [-2]"),
     "tangential_penalty": Field(float, None, positive, "N/m [the normal stiffness at the switch gap]"),
     "tangential_viscosity": Field(float, None, non_negative, "N s/m [0]"),
-    "damping_ratio": Field(float, None, non_negative, "normal damping ratio [0.5]"),
+    "damping_ratio": Field(float, None, non_negative,
+                           "normal damping ratio zeta, a fraction of a contact's critical damping [0.5]"),
 }
 
 _LAMBDA = _within(0.0, 1e12, "")
@@ -258,13 +265,14 @@ GRAIN_COMPRESSION = {
     "vem": VEM,
     "grain": GRAIN,
     "loading": {
-        "mode": Field(("uniaxial", "confined"), "uniaxial"),
+        "mode": Field(("uniaxial", "confined"), "uniaxial",
+                      doc="uniaxial: the sides free; confined: every vertex held laterally (no lateral strain)"),
         "max_strain": Field(float, 0.3, open_unit_interval, "engineering strain 1 - h/h0"),
         "steps": Field(int, 30, _count(1, 100_000), "load steps"),
     },
     "solver": {
         "rtol": Field(float, 1e-9, open_unit_interval, "Newton tolerance, relative"),
-        "max_iterations": Field(int, 40, _ITERATIONS),
+        "max_iterations": Field(int, 40, _ITERATIONS, "Newton iterations per load step before the run stops"),
     },
     "output": {
         "vtk": Field(bool, True, doc="write the ParaView series grain.pvd"),
@@ -311,9 +319,11 @@ PACK = {
                        doc="sand: hull of points on an ellipsoid (rounded); angular: an ellipsoid cut by planes "
                            "(flat faces, sharp edges; docs/results.md, grain shapes)"),
         "vertices": Field(int, 30, _count(8, MAX_VERTICES), "vertices per grain (angular: about)"),
-        "elongation": Field(float, 0.8, _AXIS_RATIO),
-        "flatness": Field(float, 0.8, _AXIS_RATIO),
-        "roughness": Field(float, 0.15, _in(0, 1, hi_open=True)),
+        "elongation": Field(float, 0.8, _AXIS_RATIO, "intermediate/long axis of the grains' ellipsoid (Zingg's I/L)"),
+        "flatness": Field(float, 0.8, _AXIS_RATIO, "short/intermediate axis of the grains' ellipsoid (Zingg's S/I)"),
+        "roughness": Field(float, 0.15, _in(0, 0.5, hi_open=True),
+                           "relative radial perturbation of a grain's points (sand) or of its cutting planes "
+                           "(angular)"),
         "clearance": Field(float, 0.02, _within(0.0, 10.0, "radii"),
                            "gap between grains in the column, in circumscribed radii"),
     },

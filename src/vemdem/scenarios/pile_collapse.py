@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..analysis.plots import plot_grains_3d
-from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
+from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile, repose_headline
 from ..config import tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import box_walls, corner_mirrors
@@ -34,6 +34,7 @@ from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
+headline = repose_headline  # the line `vemdem run` ends with
 SCHEMA = tables.PILE_COLLAPSE
 
 

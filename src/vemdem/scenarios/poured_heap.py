@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.plots import plot_grains_3d
-from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile
+from ..analysis.repose import measure_pile, pile_axis, plot_heap, plot_pile, repose_headline
 from ..config import ConfigError, tables
 from ..config.build import scene_from, solver_options_from
 from ..contact.walls import Motion, PlaneWall, box_sides, corner_mirrors, disc_wall
@@ -40,6 +40,7 @@ from .identity import run_identity
 from .pack import initial_state_from
 
 RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
+headline = repose_headline  # the line `vemdem run` ends with
 SCHEMA = tables.POURED_HEAP
 
 

@@ -42,6 +42,40 @@ EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedome
                  "soft-oedometer": "soft-oedometer.toml", "triaxial": "triaxial.toml",
                  "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml"})
 
+# what `vemdem example` prints beside each name: one line each
+EXAMPLE_LINES = {
+    "grain_compression": "one sand grain squeezed between two frictionless plates: force against strain",
+    "drop": "two sand grains dropped into a box: the smallest scene, a template for your own",
+    "pile": "the main job: 160 rigid grains collapse into a corner; the heap's angle of repose",
+    "pile-flexible": "the main job's collapse with flexible grains, implicit (run pile first)",
+    "paper-pack": "the paper's 515-grain pack settling in an 8 mm box (mass scaling 1e6)",
+    "paper-collapse-high": "the paper's collapse at mu 0.9/0.8 from paper-pack (run it first)",
+    "paper-collapse-mid": "the paper's collapse at mu 0.6/0.5 from paper-pack (run it first)",
+    "paper-collapse-low": "the paper's collapse at mu 0.3/0.2 from paper-pack (run it first)",
+    "paper-compression": "the paper's lid compression of a 110-grain pack: force against strain",
+    "poured-heap": "500 rigid grains flow out from under a rising box onto a disc: a poured heap's angle",
+    "tilting-box": "a pack tilts until its surface avalanches: the maximum angle of stability",
+    "paper-pack-implicit": "paper-pack at the real density, implicit Newmark (the paper's method)",
+    "paper-collapse-high-implicit": "paper-collapse-high at the real density, from paper-pack-implicit",
+    "paper-collapse-mid-implicit": "paper-collapse-mid at the real density, from paper-pack-implicit",
+    "paper-collapse-low-implicit": "paper-collapse-low at the real density, from paper-pack-implicit",
+    "paper-compression-implicit": "paper-compression at the real density, implicit Newmark",
+    "oedometer": "60 grains under a servo lid, 25 -> 50 -> 25 -> 50 kPa: K0 and the constrained moduli",
+    "paper-oedometer": "the paper's 515-grain pack under a servo lid to 100 kPa and back",
+    "soft-oedometer": "rubber-like flexible grains compressed past jamming to 3 MPa",
+    "triaxial": "drained triaxial compression of 100 rigid grains at 50 kPa: friction angles, dilatancy",
+    "triaxial-flexible": "the triaxial example with flexible grains, implicit (mass scaling 100)",
+    "direct-shear": "a split box of 240 rigid grains sheared at 50 kPa: peak and residual angles",
+}
+
+
+def example_line(name: str) -> str:
+    """An example's one line: EXAMPLE_LINES, else the first comment line of its config."""
+    if name in EXAMPLE_LINES:
+        return EXAMPLE_LINES[name]
+    first = example_text(name).lstrip().splitlines()[0]
+    return first.lstrip("#").strip() if first.startswith("#") else ""
+
 
 def scenario_module(name):
     if not isinstance(name, str):
