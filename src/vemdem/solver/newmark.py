@@ -38,7 +38,7 @@ from ..model.scene import Scene
 from .cycles import HeldPairs
 from .defaults import NEWTON_ITERATIONS, default
 from .linear import NewtonSystem, make_linear_solver, solve
-from .state import RunStats, State, StepControl, StepInfo, StepRejected, TimeStepTooSmall
+from .state import RunStats, State, StepControl, StepInfo, StepRejected
 
 __all__ = ["NewmarkParameters", "advance", "energy_tolerance", "initial_state", "newmark_step", "step_limit", "total_energy"]
 
@@ -616,21 +616,12 @@ def advance(scene: Scene, state: State, t_end: float, control: StepControl, para
                 energy, reactions = new_energy, info.wall_reactions
         except (StepRejected, np.linalg.LinAlgError) as exc:
             stats.reject(exc)
-            control.dt = 0.5 * h
-            control.easy_streak = 0
-            if control.dt < control.dt_min:
-                raise TimeStepTooSmall(
-                    f"time step {control.dt:.3g} s fell below the minimum {control.dt_min:.3g} s at t = {state.t:.6g} s "
-                    f"(last rejection: {exc})"
-                ) from None
+            control.rejected(h, state.t, exc)
             continue
         state = new
         limit = step_limit(scene, state, control)
         stats.accept(info)
-        control.easy_streak = control.easy_streak + 1 if info.iterations <= control.easy_iterations else 0
-        if control.easy_streak >= control.grow_after and h == control.dt:
-            control.dt = min(control.dt * control.grow, control.dt_max)
-            control.easy_streak = 0
+        control.accepted(h, info.iterations)
         if on_step is not None:
             turned = scene.gravity.copy()
             on_step(state, info, h)

@@ -81,6 +81,23 @@ class StepControl:
     entry_fraction: float = default("entry_fraction")
     energy_growth: float = default("energy_growth")  # implicit: largest energy gain of a step, in sum m g d (0: off)
 
+    def rejected(self, h: float, t: float, cause: BaseException) -> None:
+        """A step of length h from time t was rejected: the next try is half as long, and none may
+        be below dt_min (TimeStepTooSmall, naming the cause)."""
+        self.dt = 0.5 * h
+        self.easy_streak = 0
+        if self.dt < self.dt_min:
+            raise TimeStepTooSmall(f"time step {self.dt:.3g} s fell below the minimum {self.dt_min:.3g} s at "
+                                   f"t = {t:.6g} s (last rejection: {cause})") from None
+
+    def accepted(self, h: float, iterations: int) -> None:
+        """A step of length h was accepted after `iterations` Newton iterations: after grow_after
+        easy steps in a row at the full step, the step grows by `grow` (up to dt_max)."""
+        self.easy_streak = self.easy_streak + 1 if iterations <= self.easy_iterations else 0
+        if self.easy_streak >= self.grow_after and h == self.dt:
+            self.dt = min(self.dt * self.grow, self.dt_max)
+            self.easy_streak = 0
+
 
 @dataclass
 class RunStats:
