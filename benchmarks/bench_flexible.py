@@ -4,6 +4,8 @@ mass scaling (docs/selective-mass-scaling.md).
     python benchmarks/bench_flexible.py                         # the main job's collapse (pile)
     python benchmarks/bench_flexible.py --examples pile,oedometer,triaxial --out runs/flex
     python benchmarks/bench_flexible.py --lambdas auto,0 --max-time 0.05
+    python benchmarks/bench_flexible.py --examples pile24 --lambdas 1e4,3e6 --set contact.mu_s=0 \
+        --set contact.mu_d=0 --max-time 0.1          # the energy books' table (docs/selective-mass-scaling.md)
 
 For each example: its pack is settled once with rigid grains (the example as shipped, into
 OUT/NAME/pack-run), then the test runs from that pack (`initial_state`) with rigid grains and with
@@ -12,7 +14,9 @@ numbers; 0 is the unscaled lumped mass, bound by the grains' own vibration: give
 `--max-time`). A short warm-up compiles the kernels first, so the wall times compare models, not
 compilers. Prints one row per run: steps, simulated time, wall time, grain-steps per second,
 the headline figures, and the flexible/rigid wall-time ratio on the same pack. Nothing asserts a
-timing.
+timing. `pile24` is `bench_pile.py`'s 24-grain pile (minutes, not the main job's tens of
+minutes); `--set TABLE.KEY=VALUE` changes a key of every run (e.g. `solver.safety=0.1`,
+`contact.damping_ratio=0`); each run's energy books are printed (`balance_error`).
 """
 
 from __future__ import annotations
@@ -34,6 +38,22 @@ HEADLINES = {  # summary keys worth printing, by scenario
     "triaxial": ("phi_peak_deg", "phi_cs_deg", "E50_Pa"),
     "direct_shear": ("phi_peak_deg", "phi_residual_deg"),
 }
+
+
+def _example(name: str) -> dict:
+    if name == "pile24":
+        from bench_pile import PILE  # noqa: PLC0415 - a sibling script, found from this folder
+
+        return copy.deepcopy(PILE)
+    return tomllib.loads(example_text(name))
+
+
+def _apply(raw: dict, settings: list[str]) -> dict:
+    for item in settings:
+        key, value = item.split("=", 1)
+        table, name = key.split(".")
+        raw.setdefault(table, {})[name] = tomllib.loads(f"v = {value}")["v"]
+    return raw
 
 
 def _run(raw: dict, out: Path) -> dict:
@@ -62,18 +82,19 @@ def _row(name: str, label: str, summary: dict) -> dict:
     steps, wall = summary.get("n_steps", 0), summary.get("wall_seconds", float("nan"))
     return {"example": name, "run": label, "steps": steps, "wall_s": wall,
             "grain_steps_per_s": steps * summary.get("n_grains", 0) / wall if wall else float("nan"),
-            "selective_mass_scaling": summary.get("selective_mass_scaling"), **headline}  # fmt: skip
+            "selective_mass_scaling": summary.get("selective_mass_scaling"),
+            "balance_error": (summary.get("energy") or {}).get("balance_error"), **headline}  # fmt: skip
 
 
-def bench(name: str, out: Path, lambdas: list, max_time: float | None) -> list[dict]:
-    raw = tomllib.loads(example_text(name))
+def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings: list[str]) -> list[dict]:
+    raw = _example(name)
     raw.pop("initial_state", None)
     rigid = _variant(raw, None, "rigid", 0.0, None)
     _run(rigid, out / "pack-run")  # settles the pack (the example's own, with rigid grains)
     pack = out / "pack-run" / "pack" / "state.npz"
-    rows = [_row(name, "rigid", _run(_variant(raw, pack, "rigid", 0.0, max_time), out / "rigid"))]
+    rows = [_row(name, "rigid", _run(_apply(_variant(raw, pack, "rigid", 0.0, max_time), settings), out / "rigid"))]
     for lam in lambdas:
-        summary = _run(_variant(raw, pack, "flexible", lam, max_time), out / f"flexible-{lam}")
+        summary = _run(_apply(_variant(raw, pack, "flexible", lam, max_time), settings), out / f"flexible-{lam}")
         rows.append(_row(name, f"flexible, SMS {lam}", summary))
     return rows
 
@@ -85,13 +106,15 @@ def main() -> None:
     parser.add_argument("--max-time", type=float, default=None, help="cap on a collapse's [settle] max_time (s)")
     parser.add_argument("--out", type=Path, default=Path("bench-flexible"))
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
+                        help="a config key of every run after the pack (repeatable)")
     args = parser.parse_args()
     lambdas = [x if x == "auto" else float(x) for x in args.lambdas.split(",")]
     print(f"threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, load average {os.getloadavg()[0]:.1f}")
     head_on(1.0, selective_mass_scaling=1e6)  # warm-up: the flexible explicit step's kernels compile here
     rows = []
     for name in args.examples.split(","):
-        rows += bench(name, args.out / name, lambdas, args.max_time)
+        rows += bench(name, args.out / name, lambdas, args.max_time, args.set)
         rigid = next(r for r in rows if r["example"] == name and r["run"] == "rigid")
         for r in rows:
             if r["example"] == name:

@@ -186,7 +186,7 @@ def test_auto_is_named_in_the_log_and_the_summary(tmp_path, cli):
     lam = summary["selective_mass_scaling"]
     auto = summary["selective_mass_scaling_auto"]
     assert f"lambda = {lam:.3g}" in line and lam == auto["lambda"] > 1e3
-    assert lam == min(auto["lambda_contact"], auto["lambda_period_cap"])
+    assert lam == min(auto["lambda_contact"], auto["lambda_period_cap"], auto["lambda_accuracy_cap"])
     # the scaled slowest period within the named share of a contact's duration
     assert auto["scaled_period_s"] <= auto["period_fraction"] * auto["loading_time_s"] * (1 + 1e-9)
     history = (tmp_path / "out" / "history.csv").read_text().splitlines()
