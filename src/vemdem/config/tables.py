@@ -531,8 +531,8 @@ LID_COMPRESSION["output"] = {"vtk": OUTPUT["vtk"]}  # frames come from lid.frame
 LID_COMPRESSION["contact"] = with_defaults(LID_COMPRESSION["contact"], damping_ratio=0.05)
 
 
-# The servo of a stress-controlled wall (model/servo.py) and the rule a load path's stage ends by
-# (driver/stages.py): shared by the laboratory tests
+# The servo of a stress-controlled wall (lab/servo.py) and the rule a load path's stage ends by
+# (lab/path.py): shared by the laboratory tests
 SERVO = {
     "gain": Field(float, 0.3, _in(0, 1, lo_open=True),
                   "share of the force error the wall's travel closes per step, against its own contact layer's "
