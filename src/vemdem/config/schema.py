@@ -111,13 +111,22 @@ def _coerce(key: str, value, kind):
     return value
 
 
+# Other spellings of a key, refused with a line that names it where the table has it: a target
+# stress is `stress` in every table that loads a wall (CHANGELOG.md)
+SPELLINGS = dict.fromkeys(("target", "target_stress", "pressure", "sigma", "confining_stress", "normal_stress"),
+                          "stress")  # fmt: skip
+
+
 def apply_schema(data: dict, schema: dict, prefix: str = "") -> dict:
     """Check `data` against `schema` (nested dicts of Field) and fill defaults."""
     if not isinstance(data, dict):
         raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
     unknown = sorted(set(data) - set(schema))
     if unknown:
-        raise ConfigError(f"{prefix}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(schema))})")
+        key = unknown[0]
+        if SPELLINGS.get(key) in schema:
+            raise ConfigError(f"{prefix}{key}: unknown key; a target stress is spelled {prefix}{SPELLINGS[key]} (Pa)")
+        raise ConfigError(f"{prefix}{key}: unknown key (allowed here: {', '.join(sorted(schema))})")
     out = {}
     for key, spec in schema.items():
         name = prefix + key

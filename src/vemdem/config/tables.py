@@ -664,6 +664,33 @@ DIRECT_SHEAR["contact"]["reference_force"] = replace(
     doc="N, force per contact at the switch gap [2 x normal.stress x the mean grain size squared]")
 
 
+ISOTROPIC = {
+    "scenario": Field(("isotropic",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "sample": {
+        "gap": Field(float, 0.05, _in(0, 10, lo_open=True),
+                     "the top wall starts this many mean grain sizes above the pack's highest point"),
+    },
+    "stages": TableList({
+        "stress": Field(float, REQUIRED, _stress, "target normal stress on all six walls (Pa)"),
+        "max_time": STAGE["max_time"],
+        "max_strain": Field(float, 0.6, open_unit_interval, "a loading stage ends when the volumetric strain "
+                            "passes this (a target the sample cannot reach)"),
+    }, min_items=1),
+    # at rest below 0.1, as the triaxial's cell of the same walls and grains
+    "servo": with_defaults(SERVO, unbalanced_tolerance=0.1),
+    **granular_tables(mu_s=0.3, mu_d=0.3, every=5e-3),
+}
+# rigid grains, explicit, by default: the six walls' stages in a minute or two
+ISOTROPIC["model"] = with_defaults(MODEL, grains="rigid")
+ISOTROPIC["solver"] = with_defaults(SOLVER, integrator="explicit")
+ISOTROPIC["contact"] = with_defaults(ISOTROPIC["contact"], damping_ratio=0.05)  # as the triaxial's
+ISOTROPIC["contact"]["reference_force"] = replace(
+    TRIAXIAL["contact"]["reference_force"],
+    doc="N, force per contact at the switch gap [2 x the largest stage stress x the mean grain size squared]")
+
+
 # -------------------------------------------------------------------------------- cross-field rules
 def check_rules(cfg: dict) -> None:
     """Rules that tie several keys together; each raises a ConfigError naming the key."""
