@@ -41,10 +41,8 @@ class StageNotReached(UserWarning):
 
 
 def _per_wall(values) -> tuple:
-    """One value per wall: a single number stands for one wall."""
-    if values is None or isinstance(values, (int, float)):
-        return (values,)
-    return tuple(values)
+    """One value per wall: a single number (or None) stands for one wall."""
+    return (values,) if values is None or np.ndim(values) == 0 else tuple(values)
 
 
 @dataclass(frozen=True)
@@ -59,7 +57,7 @@ class Stage:
 
     def __post_init__(self):
         object.__setattr__(self, "stress", _per_wall(self.stress))
-        object.__setattr__(self, "max_speed", _per_wall(self.max_speed) if self.max_speed != () else ())
+        object.__setattr__(self, "max_speed", _per_wall(self.max_speed))
         object.__setattr__(self, "rates", tuple(self.rates))
 
     @property
