@@ -27,8 +27,8 @@ import numpy as np
 
 from vemdem.config.build import scene_from, solver_options_from
 from vemdem.driver.loop import simulate
-from vemdem.driver.stages import LoadPath, Stage
-from vemdem.model.servo import Servo
+from vemdem.lab.path import LoadPath
+from vemdem.lab.servo import Servo
 from vemdem.scenarios.identity import run_identity
 from vemdem.scenarios.oedometer import SCHEMA, Oedometer, pack_config_for, stages_from, with_test_law
 from vemdem.scenarios.pack import initial_state_from
@@ -46,7 +46,7 @@ class Counter:
         self.t_low = self.t_high = None
         self.wall_low = self.wall_high = None
 
-    def __call__(self, state, info) -> None:
+    def after_step(self, state, info) -> None:
         stress = float(info.wall_reactions[self.index][2]) / self.area
         if self.t_low is None and stress >= self.low:
             self.t_low, self.wall_low = state.t, time.perf_counter()
@@ -59,12 +59,18 @@ class Counter:
     def stop(self, state) -> bool:
         return self.t_high is not None
 
+    def carried(self) -> None:  # the loop checkpoints at frames only
+        return None
+
+    def carry_on(self, carried: dict) -> None:
+        pass
+
 
 def _setup(cfg: dict, out: Path):
     initial, _ = initial_state_from(cfg, None, out, None, pack_cfg=pack_config_for(cfg))
     test = Oedometer(cfg, initial)
     scene = scene_from(initial.grains, cfg, test.walls)
-    test.bind(scene, out)
+    test.bind(scene, out, stages_from(cfg, scene.material.density, test.height0, test.grain_size))
     return initial, test, scene
 
 
@@ -74,19 +80,23 @@ def stress_controlled(cfg: dict, out: Path, max_time: float) -> dict:
     integrator = make_integrator(solver_options_from(cfg), scene)
     stages = stages_from(cfg, scene.material.density, test.height0, test.grain_size)
     servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
-    path = LoadPath(servo, stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
-                    cfg["servo"]["stress_tolerance"], cfg["servo"]["unbalanced_tolerance"])  # fmt: skip
+    path = LoadPath([servo], stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
+                    stress_tolerance=cfg["servo"]["stress_tolerance"],
+                    unbalanced_tolerance=cfg["servo"]["unbalanced_tolerance"])  # fmt: skip
     marks = {}
 
-    def control(state, info):  # the load path, and the wall clock where its second stage begins
-        path(state, info)
-        if path.current >= 1 and "start" not in marks:
-            marks["start"] = time.perf_counter()
+    class Control:  # the load path, and the wall clock where its second stage begins
+        def after_step(self, state, info):
+            path.after_step(state, info)
+            if path.current >= 1 and "start" not in marks:
+                marks["start"] = time.perf_counter()
+
+        carried, carry_on = path.carried, path.carry_on
 
     t0 = time.perf_counter()
     simulate(scene, integrator, out / "stress", duration=2 * max_time, every=1e-3, vtk=False,
              identity=run_identity(cfg, SCHEMA), x0=initial.x, v0=initial.v, friction0=initial.friction,
-             stop=path.stop, control=control)  # fmt: skip
+             stop=path.stop, control=Control())  # fmt: skip
     end = time.perf_counter()
     first, decade = path.stage_records()
     return {"steps": decade["steps"], "newton": decade["newton_iterations"],
@@ -98,7 +108,7 @@ def displacement_controlled(cfg: dict, out: Path, low: float, high: float, max_t
     initial, test, scene = _setup(cfg, out)
     integrator = make_integrator(solver_options_from(cfg), scene)
     speed = stages_from({"servo": cfg["servo"], "stages": [{"stress": high, "max_time": 1, "max_strain": 1}]},
-                        scene.material.density, test.height0, test.grain_size)[0].max_speed  # fmt: skip
+                        scene.material.density, test.height0, test.grain_size)[0].max_speed[0]  # fmt: skip
     test.lid.motion.steer(0.0, speed)  # never steered again: a lid at constant speed
     counter = Counter(test.lid_index, test.area, low, high)
     t0 = time.perf_counter()

@@ -22,8 +22,10 @@ ALLOWED = {
     "io": {"geometry", "contact.walls"},
     "analysis": {"io", "geometry"},
     "config": {"model", "vem", "contact", "geometry", "io", "solver.api"},
-    "scenarios": {"config", "driver", "solver.api", "solver.statics", "solver.state", "model", "geometry", "io",
-                  "analysis", "contact.walls"},  # fmt: skip
+    # the laboratory: typed options in (never a config), the loop and the walls below it, no kernel
+    "lab": {"driver", "model", "contact.walls", "analysis", "solver.api", "solver.state", "io", "geometry"},
+    "scenarios": {"config", "driver", "lab", "solver.api", "solver.statics", "solver.state", "model", "geometry",
+                  "io", "analysis", "contact.walls"},  # fmt: skip
     "verification": {"solver", "model", "vem", "geometry", "scenarios.plates", "contact.defaults"},
     "cli": {"config", "scenarios.registry", "driver.checkpoint", "driver.loop", "sweep"},
     "sweep": {"config", "scenarios.registry", "analysis.seeds"},
@@ -104,6 +106,8 @@ def test_import_rules_hold():
     ("from ..vem.element import evaluate\n", "solver.newmark", "solver.newmark imports vem.element"),
     ("from ..scenarios import pack\n", "driver.loop", "driver.loop imports scenarios.pack"),
     ("from ..model.scene import Scene\n", "contact.ccd", "contact.ccd imports model.scene"),
+    ("from ..config import tables\n", "lab.path", "lab.path imports config.tables"),
+    ("from ..vem.element import evaluate\n", "lab.cell", "lab.cell imports vem.element"),
 ])  # fmt: skip
 def test_a_broken_rule_is_caught(tmp_path, monkeypatch, source, module, expected):
     """The checker itself: a forbidden import planted in a copy of the tree is reported."""
@@ -136,3 +140,12 @@ def test_the_value_lists_config_tables_repeats_agree_with_their_owners():
 
     assert tables.INTEGRATORS == api.INTEGRATORS
     assert tables.LINEAR_SOLVERS == NAMES
+
+
+def test_the_time_loop_declares_its_control_hook_and_probes_nothing():
+    """The loop asks a control for what `driver.loop.Control` declares, never whether it has it."""
+    from vemdem.driver import loop
+
+    source = (SRC / "driver" / "loop.py").read_text()
+    assert "hasattr(" not in source
+    assert {"after_step", "carried", "carry_on"} <= set(vars(loop.Control))

@@ -165,14 +165,14 @@ def test_the_frames_plates_close_the_box_past_the_travel():
     split's top (facing down, held) reach a grain past the largest travel outwards."""
     from types import SimpleNamespace
 
-    from vemdem.scenarios.direct_shear import ShearBox
+    from vemdem.scenarios.direct_shear import shear_box
 
     size = 1e-3
     grains = [SimpleNamespace(volume=np.pi * size**3 / 6.0)] * 2
     initial = SimpleNamespace(meta={"box": (4e-3, 3e-3), "floor": 0.0, "centre": (0.0, 0.0)}, grains=grains,
                               x=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2e-3]]))  # fmt: skip
     cfg, _ = checked_config({**CONFIG, "shear": {"max_displacement": 0.4}, "sample": {"opening": 0.2}})
-    cell = ShearBox(cfg, initial)
+    cell = shear_box(cfg, initial)
     walls = {w.name: w for w in cell.meshes}
     split = cfg["sample"]["split"] * 2e-3
     lower, upper = walls["lower -x plate"], walls["upper +x plate"]
@@ -191,26 +191,26 @@ def test_the_frames_plates_close_the_box_past_the_travel():
 
 
 def test_the_upper_frame_rides_with_the_lids_rise_and_never_sinks():
-    """The upper frame's speed rule (DirectShearPath.frame_speed), steered step by step along a lid
-    that rises, sinks below where the shear began, and rises again: the frame follows the rise,
-    stops at its start while the lid is below it, and moves again only once the lid is back above
-    the frame."""
+    """The upper frame's speed rule (lab.shear_box.ShearBox.frame_speed), steered step by step along
+    a lid that rises, sinks below where the shear began, and rises again: the frame follows the
+    rise, stops at its start while the lid is below it, and moves again only once the lid is back
+    above the frame."""
     from types import SimpleNamespace
 
     from vemdem.contact.walls import ServoMotion
-    from vemdem.scenarios.direct_shear import DirectShearPath
+    from vemdem.lab.shear_box import ShearBox
 
-    cell = SimpleNamespace(lid=SimpleNamespace(motion=ServoMotion((0.0, 0.0, -1.0))), drive=ServoMotion((1, 0, 0)),
-                           frame=ServoMotion((0.0, 0.0, 1.0)))  # fmt: skip
-    path = DirectShearPath.__new__(DirectShearPath)
-    path.cell, path.start = cell, (0.0, 0.0, 0.0)
+    cell = ShearBox.__new__(ShearBox)
+    cell.lid, cell.drive = SimpleNamespace(motion=ServoMotion((0.0, 0.0, -1.0))), ServoMotion((1, 0, 0))
+    cell.frame = ServoMotion((0.0, 0.0, 1.0))
+    start = (0.0, 0.0, 0.0)
     dt, rise, lifted = 1e-4, [], []
     lid_up = [1e-3] * 10 + [-1e-3] * 20 + [1e-3] * 20  # m/s: up by 1 um, down to 1 um below, up to 1 um above
     for i, up in enumerate(lid_up):
         t = i * dt
         cell.lid.motion.steer(t, -up)
-        cell.frame.steer(t, path.frame_speed(t))
-        rise.append(path.displacements(t + dt)[1])
+        cell.frame.steer(t, cell.frame_speed(start, t))
+        rise.append(cell.displacements(start, t + dt)[1])
         lifted.append(cell.frame.travel(t + dt))
     rise, lifted = np.array(rise), np.array(lifted)
     np.testing.assert_allclose(lifted[:10], rise[:10], atol=1e-15)  # rides up with the lid

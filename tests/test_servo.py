@@ -1,5 +1,5 @@
-"""Stress-controlled walls (model/servo.py, contact.walls.ServoMotion) and load paths whose stages
-end on a condition (driver/stages.py).
+"""Stress-controlled walls (lab/servo.py, contact.walls.ServoMotion) and load paths whose stages
+end on a condition (lab/path.py).
 
 The control law is checked against its closed form on a spring behind a contact layer, then the
 whole loop on a grain pressed between the floor and a servo lid, with flexible grains
@@ -15,10 +15,10 @@ from vemdem.analysis.microstructure import love_weber_stress
 from vemdem.config import ConfigError
 from vemdem.contact.defaults import default_contact_laws
 from vemdem.contact.walls import PlaneWall, ServoMotion
-from vemdem.driver.stages import LoadPath, Stage
 from vemdem.geometry import cube
 from vemdem.model.scene import Scene
-from vemdem.model.servo import RAMP, SEATING, STIFFNESS_RANGE, Servo
+from vemdem.lab.path import LoadPath, Stage
+from vemdem.lab.servo import RAMP, SEATING, STIFFNESS_RANGE, Servo
 from vemdem.scenarios.registry import checked_config
 from vemdem.solver.api import SolverOptions, make_integrator
 from vemdem.solver.state import RunStats
@@ -192,7 +192,7 @@ def run_path(scene, lid, lid_z, options, stresses, max_time=0.1):
     # the oedometer's cap: the speed that gives an inertia number of 5e-4 at the target
     density = scene.material.density
     stages = [Stage(s, max_time, 0.5, max_speed=5e-4 * lid_z * np.sqrt(s / density) / SIZE) for s in stresses]
-    path = LoadPath(servo, stages, lambda st: servo.travel_at(st.t) / lid_z, scene.bodies.lumped,
+    path = LoadPath([servo], stages, lambda t, start: servo.travel_at(t) / lid_z, scene.bodies.lumped,
                     scene.bodies.vertex_ptr)  # fmt: skip
     integrator = make_integrator(options, scene)
     state, stats = integrator.initial_state(), RunStats()
@@ -200,7 +200,7 @@ def run_path(scene, lid, lid_z, options, stresses, max_time=0.1):
 
     def on_step(st, info, h):
         before = path.current
-        path(st, info)
+        path.after_step(st, info)
         if path.current > before:  # a stage just ended: the contacts' stress there
             records = info.contact.records(scene.contact.all_positions(st.x, st.t))
             volume = area * (lid_z - servo.travel_at(st.t))

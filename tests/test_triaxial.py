@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from vemdem.driver.stages import unbalanced_force
+from vemdem.lab.path import unbalanced_force
 from vemdem.scenarios.registry import checked_config
-from vemdem.scenarios.triaxial import contact_at_stress
+from vemdem.scenarios.lab import contact_at_stress
 from vemdem.solver.state import State
 
 SIGMA_C = 20e3

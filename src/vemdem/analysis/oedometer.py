@@ -1,7 +1,7 @@
 """An oedometer test's measures: its frames (oedometer.csv), its stages' turning points and the
 figures summary.json reports (docs/oedometer.md).
 
-From the stages' records (driver/stages.py: each stage's target, end stress, end strain and the
+From the stages' records (lab/path.py: each stage's target, end stress, end strain and the
 lid's work over it):
 
 - K0: sigma_h / sigma_v at the ends of the first-loading stages (before the first unloading),

@@ -17,7 +17,6 @@ from ..geometry.shapes import cube, l_prism, rotation_matrix, sand_grain, tetrah
 from ..io.surfaces import load_mesh_wall, load_surface
 from ..model.scene import Scene
 from ..model.selective import auto_selective_scaling
-from ..model.servo import Servo, ServoWalls
 from ..solver.api import SolverOptions
 from ..vem.element import VemOptions
 from ..vem.material import Material
@@ -121,25 +120,6 @@ def _servo_motion(spec: dict, where: str) -> ServoMotion | None:
         raise ConfigError(f"{where}: a servo wall's motion is steered by its target stress; remove its "
                           "times, displacements and removed_at")  # fmt: skip
     return ServoMotion(tuple(_direction(spec["normal"], f"{where}.normal")))
-
-
-def servo_walls(specs: list, contact) -> ServoWalls | None:
-    """The servos of the `[[walls]]` tables with a `servo.stress`, on the scene's walls (in the tables'
-    order: planes and meshes each in theirs): the time loop's control; None where no wall has one."""
-    servos, schedules = [], []
-    count = {"plane": 0, "mesh": 0}
-    for i, spec in enumerate(specs):
-        kind = spec["type"]
-        wall = (contact.planes if kind == "plane" else contact.meshes)[count[kind]]
-        count[kind] += 1
-        servo = spec.get("servo")
-        if not servo or not servo["stress"]:
-            continue
-        if contact.wall_names.count(wall.name) > 1:
-            raise ConfigError(f"walls[{i}].name: a servo wall needs a name of its own, {wall.name!r} is taken twice")
-        servos.append(Servo(contact, wall, servo["area"], gain=servo["gain"], max_speed=servo["max_speed"]))
-        schedules.append((servo["times"], servo["stress"]))
-    return ServoWalls(servos, schedules) if servos else None
 
 
 def build_walls(specs: list, base_dir=None):

@@ -1,6 +1,6 @@
 """The laboratory tests' config tables: the servo and the load stages they share, and the
 oedometer's, the triaxial's and the direct shear's schemas, each the common part of a lab test
-(`lab_schema`) plus its own tables."""
+(`lab_schema`) plus its own tables; the isotropic compression's."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from dataclasses import replace
 
 from .checks import _in, _stress, with_defaults
 from .schema import REQUIRED, Field, TableList, open_unit_interval, positive
-from .tables import INITIAL_STATE, SOLVER, granular_tables, pack_stage
+from .tables import INITIAL_STATE, MODEL, SOLVER, granular_tables, pack_stage
 
-# The servo of a stress-controlled wall (model/servo.py) and the rule a load path's stage ends by
-# (driver/stages.py): shared by the laboratory tests
+# The servo of a stress-controlled wall (lab/servo.py) and the rule a load path's stage ends by
+# (lab/path.py): shared by the laboratory tests
 SERVO = {
     "gain": Field(float, 0.3, _in(0, 1, lo_open=True),
                   "share of the force error the wall's travel closes per step, against its own contact layer's "
@@ -128,3 +128,30 @@ DIRECT_SHEAR = lab_schema("direct_shear", 0.3, {
         "max_time": _shear_time(),
     },
 }, damping_ratio=None, reference_force="2 x normal.stress x the mean grain size squared")  # fmt: skip
+
+
+ISOTROPIC = {
+    "scenario": Field(("isotropic",), REQUIRED),
+    "initial_state": INITIAL_STATE,
+    "pack": pack_stage(),
+    "sample": {
+        "gap": Field(float, 0.05, _in(0, 10, lo_open=True),
+                     "the top wall starts this many mean grain sizes above the pack's highest point"),
+    },
+    "stages": TableList({
+        "stress": Field(float, REQUIRED, _stress, "target normal stress on all six walls (Pa)"),
+        "max_time": STAGE["max_time"],
+        "max_strain": Field(float, 0.6, open_unit_interval, "a loading stage ends when the volumetric strain "
+                            "passes this (a target the sample cannot reach)"),
+    }, min_items=1),
+    # at rest below 0.1, as the triaxial's cell of the same walls and grains
+    "servo": with_defaults(SERVO, unbalanced_tolerance=0.1),
+    **granular_tables(mu_s=0.3, mu_d=0.3, every=5e-3),
+}
+# rigid grains, explicit, by default: the six walls' stages in a minute or two
+ISOTROPIC["model"] = with_defaults(MODEL, grains="rigid")
+ISOTROPIC["solver"] = with_defaults(SOLVER, integrator="explicit")
+ISOTROPIC["contact"] = with_defaults(ISOTROPIC["contact"], damping_ratio=0.05)  # as the triaxial's
+ISOTROPIC["contact"]["reference_force"] = replace(
+    TRIAXIAL["contact"]["reference_force"],
+    doc="N, force per contact at the switch gap [2 x the largest stage stress x the mean grain size squared]")

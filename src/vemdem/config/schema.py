@@ -124,16 +124,26 @@ def _coerce(key: str, value, kind):
     return value
 
 
+# Other spellings of a key, refused with a line that names it where the table has it: a target
+# stress is `stress` in every table that loads a wall (CHANGELOG.md)
+SPELLINGS = dict.fromkeys(("target", "target_stress", "pressure", "sigma", "confining_stress", "normal_stress"),
+                          "stress")  # fmt: skip
+
+
 def _refuse_unknown(data: dict, schema: dict, prefix: str, removed: dict) -> None:
     """A ConfigError for the first key of `data` that `schema` does not know: one the package
-    removed (`removed`: dotted key, without table indices, -> why) is named as removed."""
+    removed (`removed`: dotted key, without table indices, -> why) is named as removed, another
+    spelling of a key the table has (SPELLINGS) names that key."""
     unknown = sorted(set(data) - set(schema))
     for key in unknown:
         why = removed.get(re.sub(r"\[\d+\]", "", prefix + key))
         if why:
             raise ConfigError(f"{prefix}{key}: this key was removed ({why}); delete it")
     if unknown:
-        raise ConfigError(f"{prefix}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(schema))})")
+        key = unknown[0]
+        if SPELLINGS.get(key) in schema:
+            raise ConfigError(f"{prefix}{key}: unknown key; a target stress is spelled {prefix}{SPELLINGS[key]} (Pa)")
+        raise ConfigError(f"{prefix}{key}: unknown key (allowed here: {', '.join(sorted(schema))})")
 
 
 def apply_schema(data: dict, schema: dict, prefix: str = "", removed: dict | None = None) -> dict:

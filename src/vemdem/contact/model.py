@@ -467,7 +467,7 @@ class ContactModel:
     def wall_stiffness(self, ints: np.ndarray, floats: np.ndarray) -> np.ndarray:
         """(n_walls,) the normal stiffness k(g) summed over each wall's records (in the order of
         wall_reactions): d(normal force)/d(wall travel) with the grains held, an upper bound of the
-        sample's stiffness against that wall (a servo's gain: model/servo.py)."""
+        sample's stiffness against that wall (a servo's gain: lab/servo.py)."""
         body = np.maximum(ints[:, GRAIN_A], ints[:, GRAIN_B])
         mine = body >= self.n_grains
         k = normal_stiffness(np.ascontiguousarray(floats[mine, GAP]), self.law_params)

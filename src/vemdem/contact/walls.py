@@ -67,7 +67,7 @@ class Motion:
 
 
 class ServoMotion:
-    """A wall's motion along one axis, steered step by step (a stress-controlled wall, model/servo.py).
+    """A wall's motion along one axis, steered step by step (a stress-controlled wall, lab/servo.py).
 
     Between two steerings it is linear in time: d(t) = d0 + (t - t0) s u, u the unit axis, s the
     speed set at t0. `steer(t, s)` starts the next segment at t, where the wall then is, so the

@@ -112,7 +112,7 @@ class Resumed:
     carried: dict
     changes: list = field(default_factory=list)
     wall_seconds: float | None = None
-    control: dict | None = None  # a load path's own state (driver/stages.py); None where the run has none
+    control: dict | None = None  # a load path's own state (lab/path.py); None where the run has none
 
 
 def _check_state(path: Path, state: State, dt: float, frame: int, shape: tuple | None, end: tuple | None) -> None:
@@ -304,7 +304,7 @@ def _carried(d) -> dict:
 
 
 def _control(d) -> dict | None:
-    """The load control's own state (a servo's path, a load path's stage: driver/stages.py), a JSON
+    """The load control's own state (a servo's path, a load path's stage: lab/path.py), a JSON
     object; anything else is a damaged file (ValueError)."""
     if "control" not in d.files:
         return None

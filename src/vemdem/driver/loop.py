@@ -5,9 +5,10 @@
 A frame (history.csv, grains.csv, walls.csv, ParaView) every `every` s up to `duration`, a
 checkpoint after each frame, and inside a frame at least every CHECKPOINT_EVERY_S wall seconds
 where the integrator resumes bit for bit from any step (implicit Newmark); after each frame `stop(state)` may end the run early (deterministic:
-a resumed run stops at the same frame); after every accepted step `control(state, info)` may act
-on the scene (e.g. move a servo wall from the reactions in `info.wall_reactions`), which is how
-stress-controlled tests drive their walls. Scenarios are short recipes over this loop.
+a resumed run stops at the same frame); after every accepted step `control.after_step(state,
+info)` may act on the scene (e.g. move a servo wall from the reactions in `info.wall_reactions`),
+which is how stress-controlled tests drive their walls (a `Control`). Scenarios are short recipes
+over this loop.
 """
 
 from __future__ import annotations
@@ -15,13 +16,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from ..contact.model import ContactHistory, PenetrationError
 from ..model.scene import Scene
 from ..solver.api import Integrator
-from ..solver.state import RunStats, State
+from ..solver.state import RunStats, State, StepInfo
 from .checkpoint import CheckpointError, RunIdentity, WallWork, load_checkpoint, save_checkpoint, truncate_csv
 from .frames import FRAME_CSVS, FrameWriter
 
@@ -33,6 +35,21 @@ PROGRESS_EVERY_S = 5.0
 # Inside a frame, a checkpoint at least this often (wall seconds): a frame of the 515-grain lid
 # cycle's jam took 20-80 minutes, all of it lost when the run was stopped before the frame's end.
 CHECKPOINT_EVERY_S = 600.0
+
+
+class Control(Protocol):
+    """What the loop asks of a load control (a servo's path, a lab test's stages, a tilting box's
+    gravity). `after_step` runs after every accepted step and may act on the scene it was built
+    for (a wall's steered motion, the scene's gravity), never on the loop's own state.
+    `carried()` is everything it decides from, for a checkpoint: a dict that `carry_on` takes back
+    on a resume, so the run goes on bit for bit from inside a frame; None where it keeps what a
+    checkpoint does not carry, so the loop checkpoints at frames only."""
+
+    def after_step(self, state: State, info: StepInfo) -> None: ...
+
+    def carried(self) -> dict | None: ...
+
+    def carry_on(self, carried: dict) -> None: ...
 
 
 class InitialStateError(ValueError):
@@ -57,7 +74,8 @@ class Run:
 
 def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: float, every: float, vtk: bool,
              identity: RunIdentity, x0=None, v0=None, friction0: dict | None = None, resume: bool = False, progress=None,
-             stop=None, control=None, on_frame=None, frame_csvs: tuple = (), volume=None) -> Run:  # fmt: skip
+             stop=None, control: Control | None = None, on_frame=None, frame_csvs: tuple = (),
+             volume=None) -> Run:  # fmt: skip
     """`on_frame(frame, state, contact)`, where given, sees every frame (its state and ContactResult)
     once it is written and before its checkpoint, so a run resumed from a frame's checkpoint has
     been through that frame's hook (the lid keeps the states where it turns and lets go).
@@ -73,8 +91,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
 
     def checkpoint(st: State, frames_written: int) -> None:
         wall = None if earlier is None else earlier + time.perf_counter() - t_start
-        # a servo's path and a load path's stage (driver/stages.py)
-        own = control.carried() if hasattr(control, "carried") else None
+        own = control.carried() if control is not None else None  # a servo's path, a lab test's stage
         save_checkpoint(ckpt, st, steps, stats, frames_written, identity, walls, integrator.carried(), changes, wall, own)
 
     if resume:
@@ -90,7 +107,7 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
         last_contact = contact_now(scene, state)
         walls = resumed.walls or WallWork(0.0, last_contact.wall_reactions, state.t)
         integrator.carry_on(resumed.carried)
-        if hasattr(control, "carry_on"):
+        if control is not None and control.carried() is not None:
             if resumed.control is None:
                 raise CheckpointError(f"--resume: {ckpt} holds no state of this run's load control; start the run "
                                       "again without --resume")  # fmt: skip
@@ -112,17 +129,16 @@ def simulate(scene: Scene, integrator: Integrator, out_dir: Path, *, duration: f
     # Only an integrator that carries nothing between its steps but the checkpointed state and step
     # control continues bit for bit from a checkpoint written between two steps: the explicit ones
     # renew their pair search at every `advance` call, so they checkpoint at frames only.
-    # A `control` hook may keep what it did since the last frame (the tilting box's gravity), which
-    # a checkpoint does not carry: such runs checkpoint at frames only too, unless the hook hands
-    # over all it keeps (`carried`/`carry_on`: a load path, driver/stages.py).
+    # A control may keep what it did since the last frame (the tilting box's gravity), which a
+    # checkpoint does not carry (its `carried()` is None): such runs checkpoint at frames only too.
     inside_frames = getattr(integrator, "checkpoints_inside_frames", False) and (
-        control is None or hasattr(control, "carried"))
+        control is None or control.carried() is not None)
 
     def on_step(st, info, h):
         last["info"] = info
         walls.add(scene.contact, st.t, info.wall_reactions)
         if control is not None:
-            control(st, info)
+            control.after_step(st, info)
         if inside_frames and time.perf_counter() - last["saved"] >= CHECKPOINT_EVERY_S:
             # `frame` counts the frames written: a resumed run writes frame + 1 at its time
             checkpoint(st, frame)

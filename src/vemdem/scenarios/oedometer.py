@@ -3,10 +3,11 @@ a vertical stress path (docs/oedometer.md).
 
 The pack stays in its box (floor and four fixed side walls, which measure the lateral stress). A
 horizontal lid starts `lid.gap` mean grain sizes above the pack's highest point and is steered by
-a servo (model/servo.py) through the `[[stages]]` in turn: each stage holds its target stress
-until it is reached with the sample at rest, or ends at its time or strain limit
-(driver/stages.py). The lid's speed is capped where it would make the test faster than
-quasi-static: at most the speed that gives `servo.inertia_number` at the stage's target stress.
+a servo (lab/servo.py) through the `[[stages]]` in turn: each stage holds its target stress
+until it is reached with the sample at rest, or ends at its time or strain limit (lab/path.py;
+the box is a lab/cell.py BoxCell). The lid's speed is capped where it would make the test faster
+than quasi-static: at most the speed that gives `servo.inertia_number` at the stage's target
+stress.
 
 axial strain = lid travel / the lid's starting height above the floor; sigma_v = the lid's force
 over its area; sigma_h = the side walls' mean normal force over their loaded area (box side x
@@ -41,24 +42,20 @@ from ..analysis.oedometer import (
     read_rows,
     turning_points,
 )
-from ..config import ConfigError, lab_tables
+from ..config import lab_tables
 from ..config.build import scene_from, solver_options_from
-from ..contact.walls import PlaneWall, ServoMotion, box_walls, mirrored
-from ..driver.loop import simulate
-from ..driver.stages import LoadPath, Stage, StageNotReached, unbalanced_force
-from ..driver.summary import run_summary
 from ..geometry.mass import body_volumes
-from ..io.results import CsvLog, write_json
-from ..model.bodies import equivalent_diameters
-from ..model.servo import Servo
+from ..lab.cell import SIDES, BoxCell
+from ..lab.path import LoadPath, Stage, unbalanced_force
+from ..lab.run import Frames, run_path, write_summary
+from ..lab.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
-from .lab import contact_at_stress
+from .lab import contact_at_stress, output_of, servo_options
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
 SCHEMA = lab_tables.OEDOMETER
-SIDES = ("wall -x", "wall +x", "wall -y", "wall +y")
 # the contact network where each stage ended (normals, normal forces), for fabric_rose_stages.png
 ROSE_FILE = "roses/stage_{}.npz"
 
@@ -71,51 +68,39 @@ class Oedometer:
     """The box, the lid and the measures of one test (the frames' rows and the stages' ends)."""
 
     def __init__(self, cfg: dict, initial):
-        meta = initial.meta
-        self.box, self.floor, self.centre = tuple(meta["box"]), float(meta["floor"]), tuple(meta["centre"])
-        self.area = cfg["lid"]["area"] or self.box[0] * self.box[1]
-        self.grains = initial.grains
-        self.grain_size = float(np.mean(equivalent_diameters(np.array([g.volume for g in initial.grains]))))
-        top = float(initial.x[:, 2].max())
-        self.height0 = top - self.floor + cfg["lid"]["gap"] * self.grain_size
-        lid = PlaneWall(np.array([self.centre[0], self.centre[1], self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
-                        ServoMotion((0.0, 0.0, -1.0)), "lid")  # fmt: skip
-        self.lid = lid
-        box = box_walls(*self.box, self.floor, self.centre)
         # a lubricated ring: side friction would carry part of the lid's load (up on loading, down
         # on unloading), so the lid's stress would not be the sample's
-        self.walls = (box if cfg["ring"]["friction"] else mirrored(box, SIDES)) + [lid]
+        self.cell = BoxCell(initial, cfg["lid"]["gap"], top="lid", moving=("lid",), top_area=cfg["lid"]["area"],
+                            frictionless=() if cfg["ring"]["friction"] else SIDES)  # fmt: skip
+        self.grains, self.lid, self.walls = initial.grains, self.cell.wall["lid"], self.cell.walls
+        self.area, self.grain_size, self.height0 = self.cell.section(0.0), self.cell.grain_size, self.cell.height0
 
-    def bind(self, scene, out_dir: Path) -> None:
-        self.scene, self.out_dir = scene, Path(out_dir)
+    def bind(self, scene, out_dir: Path, stages: list) -> None:
+        self.scene, self.out_dir, self.stages = scene, Path(out_dir), stages
         (self.out_dir / ROSE_FILE).parent.mkdir(parents=True, exist_ok=True)
         names = scene.contact.wall_names
         self.lid_index = names.index("lid")
         self.side_index = [names.index(n) for n in SIDES]
-        self.side_normals = np.array([scene.contact.planes[i - len(scene.contact.meshes)].normal for i in self.side_index])
         self.faces, self.face_grain = scene.surface_triangles()
 
     # ------------------------------------------------------------------ measures
     def height(self, t: float) -> float:
-        return self.height0 - self.lid.motion.travel(t)
+        return self.cell.height(t)
 
-    def strain(self, state) -> float:
-        return 1.0 - self.height(state.t) / self.height0
+    def strain(self, t: float, start=None) -> float:
+        return 1.0 - self.height(t) / self.height0
 
     def sigma_h(self, reactions: np.ndarray, t: float) -> float:
-        force = -np.einsum("ij,ij->i", reactions[self.side_index], self.side_normals)
-        side_area = np.array([self.box[1], self.box[1], self.box[0], self.box[0]]) * self.height(t)
-        return float(np.mean(force / side_area))
+        return float(np.mean(self.cell.stresses(reactions, self.side_index, SIDES, t)))
 
-    def at_stage_end(self, state, info) -> dict:
+    def at_stage_end(self, state, info, stage: int) -> dict:
         """The lateral stress and the contacts' sigma_zz (Love-Weber) where a stage ends: at rest, the
         latter is the lid's stress measured inside the sample. The contacts' normals and forces
         there are kept for the rose of the turning points (ROSE_FILE, one per stage)."""
         records = info.contact.records(self.scene.contact.all_positions(state.x, state.t))
         volume = self.area * self.height(state.t)
         pairs = pair_contacts(records.a, records.b, records.normal, records.force, self.scene.n_grains)
-        stage = self.path.current
-        np.savez(self.out_dir / ROSE_FILE.format(stage), t=state.t, target=self.path.stages[stage].stress,
+        np.savez(self.out_dir / ROSE_FILE.format(stage), t=state.t, target=self.stages[stage].target,
                  normals=pairs.normal, fn=pairs.fn)  # fmt: skip
         return {"sigma_h_end": self.sigma_h(info.wall_reactions, state.t),
                 "sigma_v_contacts_end": love_weber_zz(self.scene, state.x, records, volume)}  # fmt: skip
@@ -161,7 +146,8 @@ def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> 
     """The config's stages, each with the servo's speed cap: the lid speed that gives the inertia
     number servo.inertia_number at the stage's target (rate = speed / height)."""
     inertia = cfg["servo"]["inertia_number"]
-    return [Stage(s["stress"], s["max_time"], s["max_strain"], inertia * height * np.sqrt(s["stress"] / density) / grain_size)
+    return [Stage(s["stress"], s["max_time"], s["max_strain"],
+                  max_speed=inertia * height * np.sqrt(s["stress"] / density) / grain_size)
             for s in cfg["stages"]]  # fmt: skip
 
 
@@ -183,65 +169,44 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     cfg = with_test_law(cfg)
-    initial, path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
+    initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
     test = Oedometer(cfg, initial)
     scene = scene_from(initial.grains, cfg, test.walls)
-    test.bind(scene, out_dir)
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density
     stages = stages_from(cfg, density, test.height0, test.grain_size)
+    test.bind(scene, out_dir, stages)
     servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
-    path_ = LoadPath(servo, stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
-                     cfg["servo"]["stress_tolerance"], cfg["servo"]["unbalanced_tolerance"], test.at_stage_end)  # fmt: skip
-    test.path = path_
-    identity = run_identity(cfg, SCHEMA)
-    resume_here = resume and (out_dir / "checkpoint.npz").is_file()
-    csv_path = out_dir / "oedometer.csv"
-    log = {}
-
-    def on_frame(frame, state, contact):
-        if not log:  # opened at the first frame: a resumed run's loop has cut the file back to its checkpoint by then
-            log["csv"] = CsvLog(csv_path, list(HEADER), mode="a" if resume_here and csv_path.is_file() else "w")
-        log["csv"].write(*test.row(state, contact, min(path_.current, len(stages) - 1), density))
-
+    path = LoadPath([servo], stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
+                    at_end=test.at_stage_end, **servo_options(cfg))  # fmt: skip
+    frames = Frames("oedometer.csv", HEADER,
+                    lambda state, contact: test.row(state, contact, min(path.current, len(stages) - 1), density))
     # a stage begins at the step after the last one ended and ends at the first step past its
     # max_time: up to a frame per stage on top of the stages' times lets the last one end at its limit
     duration = float(sum(s.max_time for s in stages)) + len(stages) * cfg["output"]["every"]
-    try:
-        result = simulate(scene, integrator, out_dir, duration=duration, every=cfg["output"]["every"],
-                          vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x, v0=initial.v,
-                          friction0=initial.friction, resume=resume_here, progress=progress, stop=path_.stop,
-                          control=path_, on_frame=on_frame, frame_csvs=("oedometer.csv",),
-                          volume=lambda t, x: test.area * test.height(t))  # fmt: skip
-    finally:
-        if log:
-            log["csv"].close()
-    records = path_.stage_records()
-    for r in records:
-        if not r["end_reason"]:
-            warnings.warn(StageNotReached(f"stage {r['stage']} ({r['target']:g} Pa) had not ended when the run did"),
-                          stacklevel=2)  # fmt: skip
-        elif r["end_reason"] != "reached":
-            warnings.warn(StageNotReached(f"stage {r['stage']} ({r['target']:g} Pa) ended at its {r['end_reason']} "
-                                          f"with the lid at {r['end_stress']:.4g} Pa"), stacklevel=2)  # fmt: skip
-    rows = read_rows(csv_path)
+    identity = run_identity(cfg, SCHEMA)
+    result, _ = run_path(scene, integrator, path, initial, out_dir, duration=duration, output=output_of(cfg),
+                         identity=identity, frames=frames, volume=lambda t: test.area * test.height(t),
+                         progress=progress, resume=resume)  # fmt: skip
+    records = path.stage_records()
+    rows = read_rows(out_dir / "oedometer.csv")
     figures = oedometer_figures(records, rows)
     title = f"{scene.n_grains} grains, E = {scene.material.E:.3g} Pa, {integrator.name}"
     plot_oedometer(rows, turning_points(records), out_dir / "oedometer.png", title, test.area)
     plot_stage_roses(out_dir, records)
-    summary = run_summary("oedometer", scene, result, t_start)
-    summary.update(figures)
-    summary["stages"] = records
-    summary["largest_grain_strain"] = strains = grain_strain_summary(grain_strain_maxima(out_dir / "grains.csv"))
+    return write_summary(out_dir, "oedometer", scene, result, t_start, records, state_path=state_path,
+                         fingerprint=identity.fingerprint, **figures,
+                         largest_grain_strain=grain_strains(out_dir), lid_start_height=test.height0,
+                         lid_area=test.area, grain_size=test.grain_size)  # fmt: skip
+
+
+def grain_strains(out_dir: Path) -> dict:
+    """The grains' largest strains over the run, with one warning where a grain passed the
+    element's validated range."""
+    strains = grain_strain_summary(grain_strain_maxima(out_dir / "grains.csv"))
     if strains["grains_past_validated_range"]:
         warnings.warn(GrainStrainWarning(
             f"{strains['grains_past_validated_range']} grains strained past the single element's validated range "
             f"({VALIDATED_STRAIN:.0%}): the largest {strains['max']:.1%} (grain {strains['grain']}); their forces there "
-            "are the element's, not checked against refined FE (docs/oedometer.md)"), stacklevel=2)  # fmt: skip
-    summary["lid_start_height"] = test.height0
-    summary["lid_area"] = test.area
-    summary["grain_size"] = test.grain_size
-    summary["initial_state"] = str(path)
-    summary["config_fingerprint"] = identity.fingerprint
-    write_json(out_dir / "summary.json", summary)
-    return summary
+            "are the element's, not checked against refined FE (docs/oedometer.md)"), stacklevel=3)  # fmt: skip
+    return strains

@@ -20,6 +20,7 @@ SCENARIOS = {
     "oedometer": "vemdem.scenarios.oedometer",
     "triaxial": "vemdem.scenarios.triaxial",
     "direct_shear": "vemdem.scenarios.direct_shear",
+    "isotropic": "vemdem.scenarios.isotropic",
 }
 
 EXAMPLES = {
@@ -40,7 +41,8 @@ EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EX
 # the laboratory tests, at the real density
 EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml",
                  "soft-oedometer": "soft-oedometer.toml", "triaxial": "triaxial.toml",
-                 "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml"})
+                 "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml",
+                 "isotropic": "isotropic.toml"})
 
 # what `vemdem example` prints beside each name: one line each
 EXAMPLE_LINES = {

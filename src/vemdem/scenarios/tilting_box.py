@@ -71,10 +71,10 @@ SCHEMA = tables.TILTING_BOX
 class Tilt:
     """The tilt against time: tilt.start from t = 0 until the pack is at rest there again (the turn
     to tilt.start shakes it), then tilt.rate more per second up to tilt.max, held from the
-    avalanche on. `stop` and `control` are the time loop's hooks. The two events (tilting from,
-    avalanche; with the surface mark, the surface layer and where it stood) are kept in
-    DIR/tilt.json, written at the frame that finds them, after that frame's checkpoint: a resumed
-    run reads them back or, resuming from that very frame, finds them again."""
+    avalanche on. `stop` and `after_step` are the time loop's hooks (a driver.loop.Control). The
+    two events (tilting from, avalanche; with the surface mark, the surface layer and where it
+    stood) are kept in DIR/tilt.json, written at the frame that finds them, after that frame's
+    checkpoint: a resumed run reads them back or, resuming from that very frame, finds them again."""
 
     def __init__(self, scene, cfg: dict, meta: dict, out_dir: Path, lumped: bool, resume: bool):
         self.scene, self.meta, self.lumped = scene, meta, lumped
@@ -103,8 +103,16 @@ class Tilt:
     def gravity(self, t: float) -> np.ndarray:
         return tilted_gravity(self.angle(t), self.g)
 
-    def control(self, state, info) -> None:
+    def after_step(self, state, info) -> None:
         self.scene.gravity[:] = self.gravity(state.t)
+
+    def carried(self) -> None:
+        """None: the gravity turned since the last frame is found again from the frame's time by
+        `stop`, so the loop checkpoints this run at frames only."""
+        return None
+
+    def carry_on(self, carried: dict) -> None:
+        pass
 
     def stop(self, state) -> bool:
         self.scene.gravity[:] = self.gravity(state.t)  # a resumed run starts here
@@ -175,7 +183,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     result = simulate(scene, integrator, out_dir, duration=tilt.full_tilt_time + 2 * cfg["settle"]["max_time"],
                       every=cfg["output"]["every"], vtk=cfg["output"]["vtk"], identity=identity, x0=initial.x,
                       v0=initial.v, friction0=initial.friction, resume=resume_here, progress=progress,
-                      stop=tilt.stop, control=tilt.control)  # fmt: skip
+                      stop=tilt.stop, control=tilt)  # fmt: skip
     state = result.state
     summary = run_summary("tilting_box", scene, result, t_start)
     summary.update(measure_tilt(scene, state, tilt, meta, out_dir))

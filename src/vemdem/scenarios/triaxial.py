@@ -6,9 +6,9 @@ floor (the bottom platen, fixed), four lateral walls and a top platen that start
 mean grain sizes above the pack's highest point. Two stages:
 
 1. consolidation: the top platen and the four lateral walls are each steered by a servo
-   (model/servo.py) to the confining stress; the stage ends when all five hold it within
+   (lab/servo.py) to the confining stress; the stage ends when all five hold it within
    `servo.stress_tolerance` with the sample at rest (the unbalanced force ratio below
-   `servo.unbalanced_tolerance`, driver/stages.py), or at its `max_time`;
+   `servo.unbalanced_tolerance`, lab/path.py), or at its `max_time`;
 2. shear: the top platen moves down at a constant speed (the axial strain rate that gives
    `shear.inertia_number` at the confining stress, over the consolidated height) while the
    lateral walls' servos hold the confining stress; the stage ends at `shear.max_strain` of axial
@@ -31,7 +31,6 @@ scene outputs; `--resume` continues a run from inside either stage.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -47,127 +46,61 @@ from ..analysis.triaxial import (
     until_sheared,
 )
 from ..config import lab_tables
-from ..config.build import scene_from, solver_options_from
-from ..contact.walls import PlaneWall, ServoMotion
-from ..driver.stages import unbalanced_force
 from ..geometry.mass import body_volumes
-from ..model.bodies import equivalent_diameters
-from ..model.servo import Servo
-from ..solver.api import make_integrator
+from ..lab.cell import SIDES, BoxCell
+from ..lab.path import Drive, LoadPath, Stage, unbalanced_force
+from ..lab.run import Frames, run_path, write_summary
+from ..lab.servo import Servo, quasi_static_rate
 from .identity import run_identity
-from .lab import STAGES, TwoStagePath, contact_at_stress, run_stages, write_summary
-from .pack import initial_state_from
+from .lab import output_of, sample_in, servo_options
 
 RESUMABLE = True
 SCHEMA = lab_tables.TRIAXIAL
-LATERAL = ("wall -x", "wall +x", "wall -y", "wall +y")
+LOADED = (*SIDES, "top")  # the servo walls: the lateral ones, then the top platen
 
 
-class TriaxialCell:
-    """The six walls of one sample and its measures: dimensions from the walls' travel."""
-
-    def __init__(self, cfg: dict, initial):
-        meta = initial.meta
-        self.box, self.floor = tuple(float(v) for v in meta["box"]), float(meta["floor"])
-        cx, cy = (float(v) for v in meta["centre"])
-        self.grain_size = float(np.mean(equivalent_diameters(np.array([g.volume for g in initial.grains]))))
-        self.height0 = float(initial.x[:, 2].max()) - self.floor + cfg["sample"]["gap"] * self.grain_size
-        hx, hy = 0.5 * self.box[0], 0.5 * self.box[1]
-        sides = (((cx - hx, cy), (1.0, 0.0)), ((cx + hx, cy), (-1.0, 0.0)), ((cx, cy - hy), (0.0, 1.0)),
-                 ((cx, cy + hy), (0.0, -1.0)))  # fmt: skip
-        self.lateral = [PlaneWall(np.array([x, y, self.floor]), np.array([nx, ny, 0.0]), ServoMotion((nx, ny, 0.0)),
-                                  name,
-                                  frictionless=True)
-                        for ((x, y), (nx, ny)), name in zip(sides, LATERAL)]  # fmt: skip
-        self.top = PlaneWall(np.array([cx, cy, self.floor + self.height0]), np.array([0.0, 0.0, -1.0]),
-                             ServoMotion((0.0, 0.0, -1.0)), "top", frictionless=True)  # fmt: skip
-        floor = PlaneWall(np.array([cx, cy, self.floor]), np.array([0.0, 0.0, 1.0]), name="floor", frictionless=True)
-        self.walls = [floor, *self.lateral, self.top]
-
-    # ------------------------------------------------------------------ dimensions
-    def widths(self, t: float) -> tuple[float, float]:
-        d = [w.motion.travel(t) for w in self.lateral]
-        return self.box[0] - d[0] - d[1], self.box[1] - d[2] - d[3]
-
-    def height(self, t: float) -> float:
-        return self.height0 - self.top.motion.travel(t)
-
-    def volume(self, t: float) -> float:
-        wx, wy = self.widths(t)
-        return wx * wy * self.height(t)
-
-    def areas(self, t: float) -> list[float]:
-        """Loaded areas of the lateral walls (in LATERAL's order) and of the top platen."""
-        wx, wy, h = *self.widths(t), self.height(t)
-        return [wy * h, wy * h, wx * h, wx * h, wx * wy]
-
-    def stresses(self, reactions: np.ndarray, indices: list[int], normals: np.ndarray, t: float) -> tuple[float, float]:
-        """(sigma_1, sigma_3): the top platen's stress and the lateral walls' mean stress (Pa)."""
-        force = -np.einsum("ij,ij->i", reactions[indices], normals)
-        stress = force / np.array(self.areas(t))
-        return float(stress[4]), float(np.mean(stress[:4]))
+def cell_for(cfg: dict, initial) -> BoxCell:
+    """Six frictionless walls: the floor stays, the lateral walls and the top platen move."""
+    return BoxCell(initial, cfg["sample"]["gap"], moving=LOADED, frictionless=("floor", *LOADED))
 
 
-class TriaxialPath(TwoStagePath):
-    """Consolidation by the five servos, then shear by the platen at a constant speed with the four
-    lateral servos (scenarios.lab.TwoStagePath)."""
-
-    def __init__(self, cell: TriaxialCell, servos: list[Servo], cfg: dict, shear_rate: float, lumped, vertex_ptr):
-        super().__init__(servos, cfg["consolidation"]["stress"],
-                         (cfg["consolidation"]["max_time"], cfg["shear"]["max_time"]), cfg["servo"], lumped,
-                         vertex_ptr)  # fmt: skip
-        self.cell, self.max_strain, self.rate = cell, float(cfg["shear"]["max_strain"]), float(shear_rate)
-        cell.now = 0.0  # the time the servos' areas are taken at
-
-    def __call__(self, state, info) -> None:
-        self.cell.now = state.t  # the servos' areas are the sample's at this step
-        super().__call__(state, info)
-
-    def begin(self, t: float) -> tuple:
-        return t, self.cell.height(t), self.cell.volume(t)
-
-    def strains(self, t: float) -> tuple[float, float]:
-        """(axial, volumetric) strain from the sample where the current stage began."""
-        _, h0, v0 = self.start if self.start is not None else (0.0, self.cell.height0, self.cell.volume(0.0))
-        return 1.0 - self.cell.height(t) / h0, 1.0 - self.cell.volume(t) / v0
-
-    def progress(self, t: float) -> float:
-        return self.strains(t)[0]
-
-    def consolidated(self) -> bool:
-        return all(self.held(s) for s in self.servos)
-
-    def sheared(self, t: float) -> str:
-        return "max_strain" if self.strains(t)[0] >= self.max_strain else ""
-
-    def steer(self, t: float) -> None:
-        lateral, top = self.servos[:4], self.servos[4]
-        for servo in lateral:
-            servo.steer(t)
-        if self.current == 0:
-            top.steer(t)
-        else:  # shear (and after it, the platen held): constant speed over the consolidated height
-            top.motion.steer(t, self.rate * self.start[1] if self.current == 1 else 0.0)
+def mark(cell: BoxCell):
+    """What a stage's strains are measured from: (its start time, the sample's height and volume)."""
+    return lambda t: (t, cell.height(t), cell.volume(t))
 
 
-def servos_for(cell: TriaxialCell, contact, cfg: dict, density: float) -> list[Servo]:
+def strains(cell: BoxCell, start: tuple | None, t: float) -> tuple[float, float]:
+    """(axial, volumetric) strain from the sample where the current stage began."""
+    _, h0, v0 = start if start is not None else (0.0, cell.height0, cell.volume(0.0))
+    return 1.0 - cell.height(t) / h0, 1.0 - cell.volume(t) / v0
+
+
+def servos_for(cell: BoxCell, contact, cfg: dict, density: float) -> list[Servo]:
     """The lateral walls' servos and the top platen's, each capped at the speed that strains the
     sample along its axis at the rate of `servo.inertia_number` at the confining stress."""
     sigma_c = cfg["consolidation"]["stress"]
-    rate = cfg["servo"]["inertia_number"] * np.sqrt(sigma_c / density) / cell.grain_size
+    rate = quasi_static_rate(cfg["servo"]["inertia_number"], sigma_c, density, cell.grain_size)
     lengths = (cell.box[0], cell.box[0], cell.box[1], cell.box[1], cell.height0)
-    servos = []
-    for k, (wall, length) in enumerate(zip([*cell.lateral, cell.top], lengths)):
-        area = (lambda k=k: cell.areas(cell.now)[k])
-        servos.append(Servo(contact, wall, area, gain=cfg["servo"]["gain"], max_speed=rate * length, target=sigma_c))
-    return servos
+    return [Servo(contact, cell.wall[name], (lambda t, name=name: cell.area(name, t)), gain=cfg["servo"]["gain"],
+                  max_speed=rate * length, target=sigma_c)
+            for name, length in zip(LOADED, lengths)]  # fmt: skip
 
 
-def frame_row(cell: TriaxialCell, path: TriaxialPath, scene, state, contact, walls: tuple, density: float) -> list:
+def stages_for(cfg: dict, shear_rate: float) -> list[Stage]:
+    """Consolidation by the five servos; shear by the platen at a constant strain rate over the
+    consolidated height, the lateral servos holding the confining stress."""
+    sigma_c = cfg["consolidation"]["stress"]
+    return [Stage((sigma_c,) * 5, cfg["consolidation"]["max_time"], rates=(None,), name="consolidation"),
+            Stage((sigma_c,) * 4 + (None,), cfg["shear"]["max_time"], cfg["shear"]["max_strain"],
+                  rates=(shear_rate,), name="shear")]  # fmt: skip
+
+
+def frame_row(cell: BoxCell, path: LoadPath, scene, state, contact, indices: list, density: float) -> list:
     t = state.t
-    sigma_1, sigma_3 = cell.stresses(contact.wall_reactions, *walls, t)
+    stress = cell.stresses(contact.wall_reactions, indices, LOADED, t)
+    sigma_1, sigma_3 = float(stress[4]), float(np.mean(stress[:4]))
     q, p = sigma_1 - sigma_3, (sigma_1 + 2.0 * sigma_3) / 3.0
-    axial, volumetric = path.strains(t)
+    axial, volumetric = strains(cell, path.start, t)
     solids = float(np.sum(body_volumes(state.x, *scene.surface_triangles(), scene.n_grains)))
     records = contact.records(scene.contact.all_positions(state.x, t))
     z_m = coordination(records.a, records.b, scene.n_grains)["mechanical_coordination"]
@@ -179,7 +112,7 @@ def frame_row(cell: TriaxialCell, path: TriaxialPath, scene, state, contact, wal
     rates = [abs(path.servos[4].motion.speed) / h, abs(path.servos[0].motion.speed + path.servos[1].motion.speed) / wx,
              abs(path.servos[2].motion.speed + path.servos[3].motion.speed) / wy]  # fmt: skip
     inertia = max(rates) * cell.grain_size / np.sqrt(p / density) if p > 0 else np.inf
-    stage = min(path.current, len(STAGES) - 1)
+    stage = min(path.current, len(path.stages) - 1)
     # the stress inside the sample, from its contacts: the walls' stresses checked independently
     lw = love_weber_stress(records.a, records.b, records.point, records.force, scene.grain_centroids(state.x),
                            cell.volume(t))  # fmt: skip
@@ -197,30 +130,25 @@ def preparation(cfg: dict, figures_e0: float) -> dict:
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
-    t_start = time.perf_counter()
-    out_dir = Path(out_dir)
-    initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
-    cell = TriaxialCell(cfg, initial)
     sigma_c = cfg["consolidation"]["stress"]
-    scene = scene_from(initial.grains, contact_at_stress(cfg, sigma_c, cell.grain_size), cell.walls)
-    integrator = make_integrator(solver_options_from(cfg), scene)
+    sample = sample_in(cfg, out_dir, base_dir, progress, resume, cell_for, sigma_c)
+    out_dir, t_start = sample.out_dir, sample.t_start
+    cell, scene, integrator = sample.cell, sample.scene, sample.integrator
     density = scene.material.density
-    servos = servos_for(cell, scene.contact, cfg, density)
-    shear_rate = cfg["shear"]["inertia_number"] * np.sqrt(sigma_c / density) / cell.grain_size
-    path = TriaxialPath(cell, servos, cfg, shear_rate, scene.bodies.lumped, scene.bodies.vertex_ptr)
-    names = scene.contact.wall_names
-    indices = [names.index(n) for n in (*LATERAL, "top")]
-    normals = np.array([w.normal for w in (*cell.lateral, cell.top)])
-    identity = run_identity(cfg, SCHEMA)
-
-    def row(state, contact):
-        cell.now = state.t
-        return frame_row(cell, path, scene, state, contact, (indices, normals), density)
-
+    shear_rate = quasi_static_rate(cfg["shear"]["inertia_number"], sigma_c, density, cell.grain_size)
+    path = LoadPath(servos_for(cell, scene.contact, cfg, density), stages_for(cfg, shear_rate),
+                    lambda t, start: strains(cell, start, t)[0], scene.bodies.lumped, scene.bodies.vertex_ptr,
+                    drives=[Drive(cell.wall["top"].motion, lambda start: start[1])], mark=mark(cell),
+                    **servo_options(cfg))  # fmt: skip
+    indices = [scene.contact.wall_names.index(n) for n in LOADED]
+    frames = Frames("triaxial.csv", HEADER,
+                    lambda state, contact: frame_row(cell, path, scene, state, contact, indices, density))
     shear_time = min(cfg["shear"]["max_time"], cfg["shear"]["max_strain"] / shear_rate)
     duration = cfg["consolidation"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
-    result, rows = run_stages(scene, integrator, out_dir, cfg, identity, initial, path, "triaxial.csv", HEADER, row,
-                              lambda t, x: cell.volume(t), duration, progress, resume)  # fmt: skip
+    identity = run_identity(cfg, SCHEMA)
+    result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),
+                            identity=identity, frames=frames, volume=cell.volume, progress=progress,
+                            resume=resume)  # fmt: skip
     records = path.stage_records()
     rows = until_sheared(rows, records[1]["end_time"] if len(records) > 1 else None)
     figures = triaxial_figures(rows)
@@ -228,9 +156,10 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_3 = {sigma_c / 1e3:g} kPa, {integrator.name}"
     plot_triaxial(rows, out_dir / "triaxial.png", title, figures)
-    return write_summary("triaxial", scene, result, t_start, out_dir, figures, records, cell,
-                         state_path, identity, confining_stress_Pa=sigma_c, axial_strain_rate=shear_rate,
-                         preparation=preparation(cfg, e0))  # fmt: skip
+    return write_summary(out_dir, "triaxial", scene, result, t_start, records, state_path=sample.state_path,
+                         fingerprint=identity.fingerprint, **figures, confining_stress_Pa=sigma_c,
+                         axial_strain_rate=shear_rate, preparation=preparation(cfg, e0),
+                         sample_start_height=cell.height0, grain_size=cell.grain_size)  # fmt: skip
 
 
 def envelope_panel(title: str, summaries: list[dict], fit: dict) -> tuple:

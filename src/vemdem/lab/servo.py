@@ -67,7 +67,8 @@ RAMP = 0.25
 
 class Servo:
     """Steers one wall whose motion is a ServoMotion along its inward normal. `target` (Pa) may be
-    changed between steps (a load path's stages, driver/stages.py)."""
+    changed between steps (a load path's stages, lab/path.py). `area` (m^2): a number, or a
+    function of the time for a wall whose loaded area changes with the sample (a triaxial cell's)."""
 
     def __init__(self, contact, wall, area, *, gain: float = 0.3, max_speed: float = np.inf, target: float = 0.0):
         if not isinstance(wall.motion, ServoMotion):
@@ -79,7 +80,8 @@ class Servo:
         self.contact, self.wall = contact, wall
         self.index = contact.wall_names.index(wall.name)
         self.normal = _inward_normal(wall)
-        self.area = area if callable(area) else (lambda a=float(area): a)
+        self.area = area if callable(area) else (lambda t, a=float(area): a)
+        self.t = 0.0  # the time of the last measurement: the loaded area is taken there
         self.gain, self.max_speed, self.target = float(gain), float(max_speed), float(target)
         self.force = 0.0  # N at the last step
         self.stiffness = 0.0  # the stiffness the last step's speed used (N/m: k in the module docstring)
@@ -94,10 +96,11 @@ class Servo:
     @property
     def stress(self) -> float:
         """The wall's measured normal stress at the last step (Pa, compressive positive)."""
-        return self.force / self.area()
+        return self.force / self.area(self.t)
 
     def measure(self, reactions: np.ndarray, ints: np.ndarray, floats: np.ndarray, t: float) -> None:
         """The wall's force and the stiffness its next speed uses, at the accepted state at time t."""
+        self.t = t
         self.force = float(-reactions[self.index] @ self.normal)
         layer = float(self.contact.wall_stiffness(ints, floats)[self.index])
         travel = self.travel_at(t)
@@ -112,7 +115,7 @@ class Servo:
 
     def speed(self, h: float) -> float:
         """The speed along the normal for the next step, from the last measurement (module docstring)."""
-        target = self.target * self.area()
+        target = self.target * self.area(self.t)
         error = target - self.force
         if self.force < SEATING * target:
             return self.max_speed
@@ -129,8 +132,8 @@ class Servo:
         began where the path was last steered)."""
         self.motion.steer(t, self.speed(t - self.motion.t0))
 
-    def __call__(self, state, info) -> None:
-        """The time loop's control hook: measure at the accepted state, steer for the next step."""
+    def after_step(self, state, info) -> None:
+        """Measure at the accepted state, steer for the next step."""
         self.measure(info.wall_reactions, info.ints, info.floats, state.t)
         self.steer(state.t)
 
@@ -153,16 +156,17 @@ class Servo:
 
 class ServoWalls:
     """Servo walls, each steered towards a target stress that is piecewise-linear in time (held
-    after its last time): the time loop's control for a scene's `[walls.servo]` tables."""
+    after its last time): the time loop's control (driver.loop.Control) for a scene's
+    `[walls.servo]` tables."""
 
     def __init__(self, servos: list[Servo], schedules: list[tuple]):
         self.servos = servos
         self.schedules = [(np.asarray(t, float), np.asarray(s, float)) for t, s in schedules]
 
-    def __call__(self, state, info) -> None:
+    def after_step(self, state, info) -> None:
         for servo, (times, stresses) in zip(self.servos, self.schedules):
             servo.target = float(np.interp(state.t, times, stresses))
-            servo(state, info)
+            servo.after_step(state, info)
 
     def carried(self) -> dict:
         return {"servos": [s.carried() for s in self.servos]}
@@ -170,6 +174,12 @@ class ServoWalls:
     def carry_on(self, carried: dict) -> None:
         for servo, c in zip(self.servos, carried["servos"]):
             servo.carry_on(c)
+
+
+def quasi_static_rate(inertia_number: float, stress: float, density: float, grain_size: float) -> float:
+    """The strain rate (1/s) whose inertia number I = rate d / sqrt(stress / density) is the one
+    given: the rate a lab test's walls stay quasi-static at (below 1e-3)."""
+    return inertia_number * np.sqrt(stress / density) / grain_size
 
 
 def _inward_normal(wall) -> np.ndarray:
