@@ -78,7 +78,8 @@ def _tables_of_scenario(page: str, scenario: str) -> dict[str, tuple[str, dict[s
     section = page.split(f'{{#{reference._anchor("scenario", scenario)}}}', 1)[1].split("\n## ", 1)[0]
     out = {}
     for line in section.splitlines():
-        found = re.match(r"- \[?`\[\[?([a-z_.]+)\]\]?`.*?\(#([a-z0-9-]+)\)(?:, with the defaults (.*))?$", line)
+        found = re.match(r"- \[?`\[\[?([a-z_.]+)\]\]?`.*?\(#([a-z0-9-]+)\)(?: \(at least \d+\))?"
+                         r"(?:, with the defaults (.*))?$", line)
         if found:
             changed = dict(re.findall(r"`(\w+) = ([^`]+)`", found.group(3) or ""))
             out[found.group(1)] = (found.group(2), changed)
@@ -106,6 +107,7 @@ def test_the_page_gives_every_key_the_default_of_its_scenarios_schema():
             else:
                 head, rest = table, []
                 while head not in listing:  # a table inside a shared one (walls.servo)
+                    assert head, f"{scenario}: {table} is not in the scenario's listing"
                     head, _, tail = head.rpartition(".")
                     rest.insert(0, tail)
                 anchor, changed = listing[head]
