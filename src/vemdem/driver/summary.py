@@ -97,8 +97,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "integrator": run.integrator.name,
         "grain_model": scene.bodies.kind,
         "mass_scaling": scene.mass_scaling,  # density factor: inertia, weight and contact force scales
-        # lambda: the flexible grains' deformation modes carry 1 + lambda times their inertia in the explicit step
-        "selective_mass_scaling": scene.selective_mass_scaling,
+        "selective_mass_scaling": scene.selective_mass_scaling,  # lambda: deformation inertia x (1 + lambda)
         "selective_mass_scaling_auto": scene.selective_auto,  # what "auto" weighed (model/selective.py)
         # a grain's slowest vibration over a contact's duration: above 0.25 the scaling changes collisions
         "vibration_contact_ratio": scene.vibration_contact_ratio(),
