@@ -16,7 +16,7 @@ ALLOWED = {
     "contact": {"geometry"},
     "model": {"vem", "contact", "geometry"},
     # config.tables: the [solver] keys' defaults, read by solver.defaults alone (test below)
-    "solver": {"model", "contact", "config.tables"},
+    "solver": {"model", "contact", "geometry", "config.tables"},
     # analysis.microstructure: the frames' fabric.csv (plain arrays in, numbers out: it runs nothing)
     "driver": {"solver", "model", "io", "contact.model", "portable", "analysis.microstructure"},
     "io": {"geometry", "contact.walls"},

@@ -34,7 +34,12 @@ from ..vem.element import (
 )
 from ..vem.mass import GrainMass, build_mass
 from ..vem.material import Material
-from ..vem.selective_mass import deformation_kinetic_energy, rigid_point_mobility, selective_accelerations
+from ..vem.selective_mass import (
+    corotational_drift,
+    deformation_kinetic_energy,
+    rigid_point_mobility,
+    selective_accelerations,
+)
 
 RIGID_MODES = 6  # a free grain's zero eigenvalues: three translations, three rotations
 
@@ -76,7 +81,11 @@ class BodyModel(Protocol):
     def vibration_periods(self) -> np.ndarray: ...
 
     def accelerations(self, force: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """M^-1 f with the mass an explicit step integrates (the explicit integrators' mass operator)."""
+        """M^-1 f with the mass an explicit step integrates (the explicit integrators' mass
+        operator), less what `drift` carries out itself."""
+
+    def drift(self, x: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """(x, v) after the explicit step's drift of h between its two kicks."""
 
 
 @dataclass
@@ -157,10 +166,20 @@ class VemBodies:
 
     def accelerations(self, force: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """M_s^-1 f: the lumped masses' accelerations, blended with each grain's rigid-body
-        acceleration when the deformation modes are scaled (vem/selective_mass.py)."""
+        acceleration when the deformation modes are scaled, less the free rotation that `drift`
+        then carries out (vem/selective_mass.py)."""
         if self.deformation_scaling == 0.0:
             return force / self.lumped[:, None]
         return selective_accelerations(force, x, v, self.lumped, self.vertex_ptr, self.deformation_scaling)
+
+    def drift(self, x: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """x + h v unscaled; with scaled deformation modes each grain's rigid motion is carried
+        out exactly and its deformation velocity turns with it (vem.selective_mass.corotational_drift):
+        a straight drift of a turning grain stretches it by a chord's sagitta each step, which the
+        scaled modes then keep as energy."""
+        if self.deformation_scaling == 0.0:
+            return x + h * v, v
+        return corotational_drift(x, v, self.lumped, self.vertex_ptr, h)
 
     def node_inverse_masses(self) -> np.ndarray:
         """(N,) what a contact at a vertex sees of its grain's inertia along a unit force, at most:

@@ -8,6 +8,9 @@ changes from one step to the next:
 
 m is the lumped (row-sum) mass; the velocity-dependent contact terms (damping, friction) see the
 half-step velocity. The forces are the same kernels as the implicit integrator's, without tangents.
+Under selective mass scaling the drift x + dt v_half carries each grain's rigid motion out exactly
+and turns its deformation velocity with it, and the kicks leave that free rotation out
+(VemBodies.drift and accelerations, docs/selective-mass-scaling.md).
 
 Stable step, recomputed every step (the safety factor covers the nonlinearity):
     dt = safety * min(2/omega_grain, min over pairs (sqrt(1 + zeta_p^2) - zeta_p) 2/omega_p, approach limit)
@@ -197,36 +200,39 @@ class ExplicitIntegrator:
         return cr.dissipative + self.params.mass_damping * self.scene.bodies.lumped[:, None] * v
 
     @staticmethod
-    def step_dissipation(state: State, damping: np.ndarray, v_half: np.ndarray, dt: float) -> float:
+    def step_dissipation(state: State, damping: np.ndarray, v_half: np.ndarray, v_moved: np.ndarray,
+                         dt: float) -> float:  # fmt: skip
         """Energy the dissipative forces took over the step, as velocity Verlet applies them: each
         step's kinetic energy changes by dt/2 (F_n + F_n+1) . v_n+1/2 (+ a telescoping dt^2 term),
         so their work is dt/2 (r_d,n + r_d,n+1) . v_n+1/2; a trapezoid of the powers F_n . v_n-1/2
-        and F_n+1 . v_n+1/2 mixes velocities and left the balance of a dropped grain 1-8 % off."""
+        and F_n+1 . v_n+1/2 mixes velocities and left the balance of a dropped grain 1-8 % off.
+        The half-step velocity before the drift meets the first kick, the one after it (turned
+        with the grains under selective mass scaling) the second."""
         before = state.bodies.get("dissipative")
         if before is None:
             before = damping
-        return 0.5 * dt * float(np.sum((before + damping) * v_half))
+        return 0.5 * dt * float(np.sum(before * v_half) + np.sum(damping * v_moved))
 
     def step(self, state: State, dt: float) -> tuple[State, StepInfo]:
         v_half = state.v + 0.5 * dt * state.a
-        x = state.x + dt * v_half
+        x, v_moved = self.scene.bodies.drift(state.x, v_half, dt)
         t1 = state.t + dt
         try:
-            acc, strain, cr = self.forces(x, v_half, t1, state.history)
+            acc, strain, cr = self.forces(x, v_moved, t1, state.history)
         except (InvertedElementError, PenetrationError) as exc:
             raise StepRejected(str(exc)) from None
         if len(cr.ints) and np.min(pair_gaps(cr.floats)) <= 0:
             raise StepRejected("a contact gap closed")
-        v = v_half + 0.5 * dt * acc
-        damping = self.dissipative_residual(cr, v_half)
+        v = v_moved + 0.5 * dt * acc
+        damping = self.dissipative_residual(cr, v_moved)
         new = State(
             t1,
             x,
             v,
             acc,
             cr.trial_history,
-            state.dissipated + self.step_dissipation(state, damping, v_half, dt),
-            float(np.sum(damping * v_half)),
+            state.dissipated + self.step_dissipation(state, damping, v_half, v_moved, dt),
+            float(np.sum(damping * v_moved)),
             {"dissipative": damping},
         )
         info = StepInfo(

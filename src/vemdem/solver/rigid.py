@@ -9,12 +9,9 @@ centroid and mass damping alpha:
     F, T at the new placement (contact sees the vertices x_i = c + R X_i, moving at v_c + w x r_i)
     v_c += h/2 F/m,   L += h/2 T
 
-The free rotation is the splitting of Dullweber, Reich and Leimkuhler (1997): with pi = R^T L the
-body-frame momentum and H = sum_k pi_k^2 / (2 I_k), the flow of each term H_k is a rotation about
-body axis k by theta_k = t pi_k / I_k (R <- R Q_k(theta_k), pi <- Q_k(-theta_k) pi, L unchanged),
-composed symmetrically 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2). Each flow is exact, the composition is
-symplectic and time-reversible: the kinetic energy of a spinning grain oscillates within O(h^2)
-and does not drift, and a spin about a principal axis is exact (tests/test_rigid.py).
+The free rotation is the splitting of Dullweber, Reich and Leimkuhler (1997), geometry/rotation.py:
+the kinetic energy of a spinning grain oscillates within O(h^2) and does not drift, and a spin
+about a principal axis is exact (tests/test_rigid.py).
 
 Stable step: the contact pairs' springs on the grains' effective masses along the pair's normal
 at the contact point, 1/m_eff = sum over the two sides of 1/m + (r x n) . I^-1 (r x n), with their
@@ -28,33 +25,11 @@ from numba import njit, prange
 
 from ..contact.ccd import damped_pair_step, rigid_pair_inverse_masses
 from ..contact.model import PenetrationError
+from ..geometry.rotation import free_rotation_step
 from ..model.rigid import RigidBodies, fit_rigid, place_vertex
 from ..model.scene import Scene
 from .explicit import ExplicitIntegrator, ExplicitParameters
 from .state import State, StepInfo, StepRejected
-
-@njit(cache=True)
-def _axis_flow(R, pi, moments, k, h):
-    """In place: R <- R Q_k(theta), pi <- Q_k(theta)^T pi, theta = h pi_k / I_k. Q_k turns the plane
-    of the other two axes (i, j) = (k+1, k+2) mod 3, so only two columns of R and two components
-    of pi change; written out because numba's 3x3 products call BLAS (0.6 ms per step at 160 grains)."""
-    theta = h * pi[k] / moments[k]
-    c, s = np.cos(theta), np.sin(theta)
-    i, j = (k + 1) % 3, (k + 2) % 3
-    for a in range(3):
-        ri, rj = R[a, i], R[a, j]
-        R[a, i] = c * ri + s * rj
-        R[a, j] = c * rj - s * ri
-    pi_i, pi_j = pi[i], pi[j]
-    pi[i] = c * pi_i + s * pi_j
-    pi[j] = c * pi_j - s * pi_i
-
-
-@njit(cache=True)
-def _body_momentum(R, L, pi):
-    """pi = R^T L, in place."""
-    for b in range(3):
-        pi[b] = R[0, b] * L[0] + R[1, b] * L[1] + R[2, b] * L[2]
 
 
 @njit(cache=True, parallel=True)
@@ -62,15 +37,7 @@ def free_rotation(rotation, momentum, moments, h):
     """R after h of torque-free motion at world angular momentum L (DLM splitting)."""
     out = rotation.copy()
     for g in prange(len(rotation)):
-        R = out[g]
-        pi = np.empty(3)
-        _body_momentum(R, momentum[g], pi)
-        # np.int64: numba compiles a callee once per literal argument value (compile time: tests/test_compile_once.py)
-        _axis_flow(R, pi, moments[g], np.int64(0), 0.5 * h)
-        _axis_flow(R, pi, moments[g], np.int64(1), 0.5 * h)
-        _axis_flow(R, pi, moments[g], np.int64(2), h)
-        _axis_flow(R, pi, moments[g], np.int64(1), 0.5 * h)
-        _axis_flow(R, pi, moments[g], np.int64(0), 0.5 * h)
+        free_rotation_step(out[g], momentum[g], moments[g], h)
     return out
 
 

@@ -35,6 +35,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..geometry.rotation import free_rotation_step
+
 
 @njit(cache=True)
 def _inverse_3x3(J: np.ndarray) -> np.ndarray:
@@ -54,11 +56,12 @@ def _inverse_3x3(J: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _grain_rigid_terms(f, x, v, m, lo, hi, out):
-    """The rigid-body acceleration's parts of the vertices lo:hi into out (4, 3): centroid, A,
-    omega, alpha. Written with scalars: small arrays made per vertex cost more than the sums."""
+def _grain_motion(x, v, m, lo, hi, J):
+    """(centroid, velocity, angular momentum about the centroid) of the vertices lo:hi, and their
+    inertia tensor about the centroid into J. Written with scalars: small arrays made per vertex
+    cost more than the sums."""
     mass = 0.0
-    c0 = c1 = c2 = u0 = u1 = u2 = F0 = F1 = F2 = 0.0
+    c0 = c1 = c2 = u0 = u1 = u2 = 0.0
     for i in range(lo, hi):
         mi = m[i]
         mass += mi
@@ -68,23 +71,16 @@ def _grain_rigid_terms(f, x, v, m, lo, hi, out):
         u0 += mi * v[i, 0]
         u1 += mi * v[i, 1]
         u2 += mi * v[i, 2]
-        F0 += f[i, 0]
-        F1 += f[i, 1]
-        F2 += f[i, 2]
     c0, c1, c2, u0, u1, u2 = c0 / mass, c1 / mass, c2 / mass, u0 / mass, u1 / mass, u2 / mass
-    T = np.zeros(3)
-    L = np.zeros(3)
-    J = np.zeros((3, 3))
+    L0 = L1 = L2 = 0.0
+    J[:] = 0.0
     for i in range(lo, hi):
         mi = m[i]
         r0, r1, r2 = x[i, 0] - c0, x[i, 1] - c1, x[i, 2] - c2
         w0, w1, w2 = v[i, 0] - u0, v[i, 1] - u1, v[i, 2] - u2
-        T[0] += r1 * f[i, 2] - r2 * f[i, 1]
-        T[1] += r2 * f[i, 0] - r0 * f[i, 2]
-        T[2] += r0 * f[i, 1] - r1 * f[i, 0]
-        L[0] += mi * (r1 * w2 - r2 * w1)
-        L[1] += mi * (r2 * w0 - r0 * w2)
-        L[2] += mi * (r0 * w1 - r1 * w0)
+        L0 += mi * (r1 * w2 - r2 * w1)
+        L1 += mi * (r2 * w0 - r0 * w2)
+        L2 += mi * (r0 * w1 - r1 * w0)
         r2sum = r0 * r0 + r1 * r1 + r2 * r2
         J[0, 0] += mi * (r2sum - r0 * r0)
         J[1, 1] += mi * (r2sum - r1 * r1)
@@ -93,44 +89,114 @@ def _grain_rigid_terms(f, x, v, m, lo, hi, out):
         J[0, 2] -= mi * r0 * r2
         J[1, 2] -= mi * r1 * r2
     J[1, 0], J[2, 0], J[2, 1] = J[0, 1], J[0, 2], J[1, 2]
+    return np.array([c0, c1, c2]), np.array([u0, u1, u2]), np.array([L0, L1, L2]), mass
+
+
+@njit(cache=True)
+def _cross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@njit(cache=True)
+def _grain_rigid_terms(f, x, v, m, lo, hi, out):
+    """The rigid-body acceleration's parts of the vertices lo:hi into out (5, 3): centroid, A,
+    omega, J^-1 T (the torque's angular acceleration), J^-1 (omega x J omega) (the free rotation's,
+    with a minus sign)."""
+    J = np.empty((3, 3))
+    c, _, L, mass = _grain_motion(x, v, m, lo, hi, J)
+    F0 = F1 = F2 = T0 = T1 = T2 = 0.0
+    for i in range(lo, hi):
+        r0, r1, r2 = x[i, 0] - c[0], x[i, 1] - c[1], x[i, 2] - c[2]
+        F0 += f[i, 0]
+        F1 += f[i, 1]
+        F2 += f[i, 2]
+        T0 += r1 * f[i, 2] - r2 * f[i, 1]
+        T1 += r2 * f[i, 0] - r0 * f[i, 2]
+        T2 += r0 * f[i, 1] - r1 * f[i, 0]
     Jinv = _inverse_3x3(J)
     omega = Jinv @ L
-    Jw = J @ omega
-    gyro = np.array([omega[1] * Jw[2] - omega[2] * Jw[1], omega[2] * Jw[0] - omega[0] * Jw[2],
-                     omega[0] * Jw[1] - omega[1] * Jw[0]])  # fmt: skip
-    alpha = Jinv @ (T - gyro)
-    out[0, 0], out[0, 1], out[0, 2] = c0, c1, c2
+    out[0] = c
     out[1, 0], out[1, 1], out[1, 2] = F0 / mass, F1 / mass, F2 / mass
     out[2] = omega
-    out[3] = alpha
-    return u0, u1, u2
+    out[3] = Jinv @ np.array([T0, T1, T2])
+    out[4] = Jinv @ _cross(omega, J @ omega)
 
 
 @njit(parallel=True, cache=True)
 def selective_accelerations(f: np.ndarray, x: np.ndarray, v: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray,
                             lam: float) -> np.ndarray:  # fmt: skip
-    """a = M_s^-1 f for every vertex (the module's formulas): f (N, 3) the forces, x and v the
-    vertices' positions and velocities (the rigid motion's angular velocity), m (N,) the lumped
-    masses, lam the deformation modes' added mass factor lambda >= 0."""
+    """The kick of the co-rotational step: a = M_s^-1 f less the free rotation's acceleration
+    omega x (omega x r) - (J^-1 (omega x J omega)) x r, which `corotational_drift` carries out
+    exactly (the module's formulas). f (N, 3) the forces, x and v the vertices' positions and
+    velocities (the rigid motion's angular velocity), m (N,) the lumped masses, lam the
+    deformation modes' added mass factor lambda >= 0."""
     a = np.empty_like(f)
     share = lam / (1.0 + lam)
     for g in prange(len(vertex_ptr) - 1):
         lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
-        t = np.empty((4, 3))
+        t = np.empty((5, 3))
         _grain_rigid_terms(f, x, v, m, lo, hi, t)
         o0, o1, o2 = t[2, 0], t[2, 1], t[2, 2]
         b0, b1, b2 = t[3, 0], t[3, 1], t[3, 2]
+        e0, e1, e2 = t[4, 0], t[4, 1], t[4, 2]
         for i in range(lo, hi):
             r0, r1, r2 = x[i, 0] - t[0, 0], x[i, 1] - t[0, 1], x[i, 2] - t[0, 2]
             s0, s1, s2 = o1 * r2 - o2 * r1, o2 * r0 - o0 * r2, o0 * r1 - o1 * r0  # omega x r
-            rigid0 = t[1, 0] + b1 * r2 - b2 * r1 + o1 * s2 - o2 * s1
-            rigid1 = t[1, 1] + b2 * r0 - b0 * r2 + o2 * s0 - o0 * s2
-            rigid2 = t[1, 2] + b0 * r1 - b1 * r0 + o0 * s1 - o1 * s0
+            # the free rotation's acceleration of this vertex: omega x (omega x r) - e x r
+            free0 = o1 * s2 - o2 * s1 - (e1 * r2 - e2 * r1)
+            free1 = o2 * s0 - o0 * s2 - (e2 * r0 - e0 * r2)
+            free2 = o0 * s1 - o1 * s0 - (e0 * r1 - e1 * r0)
             inverse = 1.0 / ((1.0 + lam) * m[i])
-            a[i, 0] = f[i, 0] * inverse + share * rigid0
-            a[i, 1] = f[i, 1] * inverse + share * rigid1
-            a[i, 2] = f[i, 2] * inverse + share * rigid2
+            a[i, 0] = f[i, 0] * inverse + share * (t[1, 0] + b1 * r2 - b2 * r1) - free0 / (1.0 + lam)
+            a[i, 1] = f[i, 1] * inverse + share * (t[1, 1] + b2 * r0 - b0 * r2) - free1 / (1.0 + lam)
+            a[i, 2] = f[i, 2] * inverse + share * (t[1, 2] + b0 * r1 - b1 * r0) - free2 / (1.0 + lam)
     return a
+
+
+@njit(cache=True)
+def _drift_rotation(J, L, h):
+    """The world rotation Q of h of torque-free motion at angular momentum L of a body of
+    inertia J (geometry/rotation.py, in the principal frame of J)."""
+    moments, axes = np.linalg.eigh(J)
+    if np.linalg.det(axes) < 0:  # a right-handed frame: the flows turn by the right-hand rule
+        axes[:, 2] = -axes[:, 2]
+    R = axes.copy()
+    free_rotation_step(R, L, moments, h)
+    return R @ axes.T
+
+
+@njit(parallel=True, cache=True)
+def corotational_drift(x: np.ndarray, v: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray,
+                       h: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Positions and velocities after a drift of h: each grain's rigid motion exactly (its centroid
+    at its velocity V, a torque-free rotation Q at its angular momentum L), its deformation
+    velocity d = v - V - omega x r carried along and turned with it:
+        x_i <- c + h V + Q (r_i + h d_i),   v_i <- V + omega' x r_i' + Q d_i,
+    omega' = J'^-1 L with the inertia J' of the new placement, so that V and L are kept exactly and
+    |d| too. A grain at rest stays where it is, to the bit."""
+    x1 = np.empty_like(x)
+    v1 = np.empty_like(v)
+    for g in prange(len(vertex_ptr) - 1):
+        lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
+        J = np.empty((3, 3))
+        c, V, L, _ = _grain_motion(x, v, m, lo, hi, J)
+        omega = _inverse_3x3(J) @ L
+        turning = L[0] != 0.0 or L[1] != 0.0 or L[2] != 0.0
+        Q = _drift_rotation(J, L, h) if turning else np.eye(3)
+        for i in range(lo, hi):
+            r = x[i] - c
+            d = v[i] - V - _cross(omega, r)
+            y = r + h * d
+            if turning:
+                y = Q @ y
+                d = Q @ d
+            x1[i] = x[i] + h * V + (y - r)
+            v1[i] = d
+        c1, _, _, _ = _grain_motion(x1, x1, m, lo, hi, J)
+        omega1 = _inverse_3x3(J) @ L
+        for i in range(lo, hi):
+            v1[i] += V + _cross(omega1, x1[i] - c1)
+    return x1, v1
 
 
 @njit(parallel=True, cache=True)
@@ -138,15 +204,15 @@ def deformation_kinetic_energy(x: np.ndarray, v: np.ndarray, m: np.ndarray, vert
     """1/2 sum m |v - V - omega x r|^2: the kinetic energy of the grains' deformation modes (their
     velocity less its rigid part, omega = I^-1 L); selective mass scaling weighs it by lambda."""
     total = np.zeros(len(vertex_ptr) - 1)
-    zero = np.zeros_like(v)
     for g in prange(len(vertex_ptr) - 1):
         lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
-        t = np.empty((4, 3))
-        u0, u1, u2 = _grain_rigid_terms(zero, x, v, m, lo, hi, t)
-        o0, o1, o2 = t[2, 0], t[2, 1], t[2, 2]
+        J = np.empty((3, 3))
+        c, u, L, _ = _grain_motion(x, v, m, lo, hi, J)
+        o0, o1, o2 = _inverse_3x3(J) @ L
+        u0, u1, u2 = u[0], u[1], u[2]
         e = 0.0
         for i in range(lo, hi):
-            r0, r1, r2 = x[i, 0] - t[0, 0], x[i, 1] - t[0, 1], x[i, 2] - t[0, 2]
+            r0, r1, r2 = x[i, 0] - c[0], x[i, 1] - c[1], x[i, 2] - c[2]
             d0 = v[i, 0] - u0 - (o1 * r2 - o2 * r1)
             d1 = v[i, 1] - u1 - (o2 * r0 - o0 * r2)
             d2 = v[i, 2] - u2 - (o0 * r1 - o1 * r0)
