@@ -180,22 +180,32 @@ def corotational_drift(x: np.ndarray, v: np.ndarray, m: np.ndarray, vertex_ptr: 
         lo, hi = vertex_ptr[g], vertex_ptr[g + 1]
         J = np.empty((3, 3))
         c, V, L, _ = _grain_motion(x, v, m, lo, hi, J)
-        omega = _inverse_3x3(J) @ L
+        o0, o1, o2 = _inverse_3x3(J) @ L
         turning = L[0] != 0.0 or L[1] != 0.0 or L[2] != 0.0
         Q = _drift_rotation(J, L, h) if turning else np.eye(3)
+        # scalars: per-vertex small arrays and 3x3 products cost more than the rest of the step
         for i in range(lo, hi):
-            r = x[i] - c
-            d = v[i] - V - _cross(omega, r)
-            y = r + h * d
+            r0, r1, r2 = x[i, 0] - c[0], x[i, 1] - c[1], x[i, 2] - c[2]
+            d0 = v[i, 0] - V[0] - (o1 * r2 - o2 * r1)
+            d1 = v[i, 1] - V[1] - (o2 * r0 - o0 * r2)
+            d2 = v[i, 2] - V[2] - (o0 * r1 - o1 * r0)
+            y0, y1, y2 = r0 + h * d0, r1 + h * d1, r2 + h * d2
             if turning:
-                y = Q @ y
-                d = Q @ d
-            x1[i] = x[i] + h * V + (y - r)
-            v1[i] = d
+                y0, y1, y2 = (Q[0, 0] * y0 + Q[0, 1] * y1 + Q[0, 2] * y2, Q[1, 0] * y0 + Q[1, 1] * y1 + Q[1, 2] * y2,
+                              Q[2, 0] * y0 + Q[2, 1] * y1 + Q[2, 2] * y2)  # fmt: skip
+                d0, d1, d2 = (Q[0, 0] * d0 + Q[0, 1] * d1 + Q[0, 2] * d2, Q[1, 0] * d0 + Q[1, 1] * d1 + Q[1, 2] * d2,
+                              Q[2, 0] * d0 + Q[2, 1] * d1 + Q[2, 2] * d2)  # fmt: skip
+            x1[i, 0] = x[i, 0] + h * V[0] + (y0 - r0)
+            x1[i, 1] = x[i, 1] + h * V[1] + (y1 - r1)
+            x1[i, 2] = x[i, 2] + h * V[2] + (y2 - r2)
+            v1[i, 0], v1[i, 1], v1[i, 2] = d0, d1, d2
         c1, _, _, _ = _grain_motion(x1, x1, m, lo, hi, J)
-        omega1 = _inverse_3x3(J) @ L
+        p0, p1, p2 = _inverse_3x3(J) @ L
         for i in range(lo, hi):
-            v1[i] += V + _cross(omega1, x1[i] - c1)
+            r0, r1, r2 = x1[i, 0] - c1[0], x1[i, 1] - c1[1], x1[i, 2] - c1[2]
+            v1[i, 0] += V[0] + (p1 * r2 - p2 * r1)
+            v1[i, 1] += V[1] + (p2 * r0 - p0 * r2)
+            v1[i, 2] += V[2] + (p0 * r1 - p1 * r0)
     return x1, v1
 
 
