@@ -29,8 +29,8 @@ from ..contact.law import normal_force
 
 # The scaled slowest vibration period may reach this many contact durations: a head-on impact of
 # two 0.9 mm grains at 90 GPa kept its restitution within 0.2 % up to 5 durations under the
-# weight's law, and within 1.2 % at 2.3 (3.5 % at 7) under a law 2,000 times stiffer (a 100 kPa
-# test's); docs/selective-mass-scaling.md
+# weight's law, within 1.2 % at 2.3 (3.5 % at 7) under a law 2,000 times stiffer (a 100 kPa
+# test's), and lost 6.5 % at 2.7 under a law 21 times stiffer; docs/selective-mass-scaling.md
 PERIOD_FRACTION = 3.0
 
 def auto_selective_scaling(scene) -> dict:
