@@ -76,13 +76,7 @@ def column_packing(
     if shape not in GRAIN_SHAPES:
         raise ValueError(f"shape must be one of {sorted(GRAIN_SHAPES)}, got {shape!r}")
     rng = np.random.default_rng(seed)
-    sizes = rng.uniform(size * (1.0 - size_spread), size * (1.0 + size_spread), n)
-    grain_seeds = rng.integers(0, 2**62, n)
-    rotations = random_rotations(rng, n)
-    make = GRAIN_SHAPES[shape]
-    shapes = [make(size=s, seed=int(k), **(shape_params or {})) for s, k in zip(sizes, grain_seeds)]
-    # vertices about the centroid, so the circumscribed sphere is centred on it
-    local = [(g.vertices - g.centroid) @ r.T for g, r in zip(shapes, rotations)]
+    sizes, shapes, local = _oriented_grains(rng, n, size, size_spread, GRAIN_SHAPES[shape], shape_params)
     radii = np.array([np.linalg.norm(v, axis=1).max() for v in local])
     pitch = 2.0 * radii.max() * (1.0 + clearance)
     gap = clearance * radii.max()
@@ -108,6 +102,17 @@ def column_packing(
     sizes.setflags(write=False)
     height = _top(grains) - floor
     return Packing(grains, sizes, seed, footprint, height, tuple(centre), floor)
+
+
+def _oriented_grains(rng, n, size, size_spread, make, shape_params):
+    """(sizes, shapes, vertices about each centroid turned by a random rotation) of n grains,
+    drawn from rng in this order: sizes, the grains' own seeds, the rotations."""
+    sizes = rng.uniform(size * (1.0 - size_spread), size * (1.0 + size_spread), n)
+    grain_seeds = rng.integers(0, 2**62, n)
+    rotations = random_rotations(rng, n)
+    shapes = [make(size=s, seed=int(k), **(shape_params or {})) for s, k in zip(sizes, grain_seeds)]
+    # vertices about the centroid, so the circumscribed sphere is centred on it
+    return sizes, shapes, [(g.vertices - g.centroid) @ r.T for g, r in zip(shapes, rotations)]
 
 
 def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -58,24 +58,7 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
             rtol=cfg["solver"]["rtol"], max_iter=cfg["solver"]["max_iterations"], on_step=on_step,
         )  # fmt: skip
     forces = [0.0] + loaded.tolist()
-    summary = {
-        "scenario": "grain_compression",
-        "mode": mode,
-        "n_vertices": grain.n_vertices,
-        "n_faces": len(grain.faces),
-        "n_steps": steps,
-        "n_newton_iterations": iterations,
-        "max_force": float(max(forces)),
-        "final_force": float(forces[-1]),
-        "max_strain": float(strains[-1]),
-        "grain_volume": grain.volume,
-        "grain_height": float(plates.height),
-        "n_top_vertices": int(len(plates.top)),
-        "n_bottom_vertices": int(len(plates.bottom)),
-        "submesh": bodies.elements.submeshes[0].method,
-        "beta_internal": bodies.elements.options.beta_internal,
-        "wall_seconds": time.perf_counter() - t_start,
-    }
+    summary = _summary(mode, grain, bodies, plates, strains, forces, iterations)
     if cfg["grain"]["shape"] == "cube" and not cfg["grain"]["file"]:
         area = cfg["grain"]["size"] ** 2
         closed = area * nominal_axial_stress(strains, material.mu, material.kappa, mode)
@@ -89,6 +72,27 @@ def run(cfg: dict, out_dir: Path, base_dir: Path | None = None, progress=None) -
     summary["wall_seconds"] = time.perf_counter() - t_start
     write_json(out_dir / "summary.json", summary)
     return summary
+
+
+def _summary(mode, grain, bodies, plates, strains, forces, iterations) -> dict:
+    """summary.json's figures of the loading (the wall time is added at the end)."""
+    return {
+        "scenario": "grain_compression",
+        "mode": mode,
+        "n_vertices": grain.n_vertices,
+        "n_faces": len(grain.faces),
+        "n_steps": len(strains) - 1,
+        "n_newton_iterations": iterations,
+        "max_force": float(max(forces)),
+        "final_force": float(forces[-1]),
+        "max_strain": float(strains[-1]),
+        "grain_volume": grain.volume,
+        "grain_height": float(plates.height),
+        "n_top_vertices": int(len(plates.top)),
+        "n_bottom_vertices": int(len(plates.bottom)),
+        "submesh": bodies.elements.submeshes[0].method,
+        "beta_internal": bodies.elements.options.beta_internal,
+    }
 
 
 def _write_frame(vtk, strain, bodies, grain, xflat):

@@ -99,8 +99,12 @@ def mesh_grain(
             stem = str(Path(tmp) / "sizing.b")
             _write_sizing_mesh(stem, grain, size, rim_size, h_far)
             nodes, elems = gen.tetrahedralize(bgmeshfilename=stem, metric=True, **options)[:2]
-    nodes = np.array(nodes, dtype=float)
-    tets = np.array(elems, dtype=np.int64)
+    return _checked_mesh(grain, np.array(nodes, dtype=float), np.array(elems, dtype=np.int64))
+
+
+def _checked_mesh(grain: Polyhedron, nodes: np.ndarray, tets: np.ndarray):
+    """TetGen's mesh with the grain's vertices first and every tet positively oriented; refused
+    if a tet is flat or the volumes do not add up to the grain's."""
     nodes, tets = _vertices_first(grain, nodes, tets)
     vol = signed_tet_volumes(nodes, tets)
     flip = vol < 0
