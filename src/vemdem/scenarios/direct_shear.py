@@ -47,7 +47,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from ..lab.shear_box import LOWER, FrameRide, OpeningTooWide, ShearBox
 from .identity import run_identity
-from .lab import output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options
 
 RESUMABLE = True
 SCHEMA = lab_tables.DIRECT_SHEAR
@@ -109,6 +109,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                     lambda state, contact: frame_row(cell, path, scene, state, contact, walls, density))
     speed = rate * cell.height0
     shear_time = min(cfg["shear"]["max_time"], cell.travel_max / speed)
+    check_every(cfg, cfg["normal"]["max_time"] + shear_time,
+                "normal.max_time, then the shear to shear.max_displacement at shear.inertia_number")
     duration = cfg["normal"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
     identity = run_identity(cfg, SCHEMA)
     result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),

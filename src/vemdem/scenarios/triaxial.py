@@ -52,7 +52,7 @@ from ..lab.path import Drive, LoadPath, Stage, unbalanced_force
 from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from .identity import run_identity
-from .lab import output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options
 
 RESUMABLE = True
 SCHEMA = lab_tables.TRIAXIAL
@@ -144,6 +144,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     frames = Frames("triaxial.csv", HEADER,
                     lambda state, contact: frame_row(cell, path, scene, state, contact, indices, density))
     shear_time = min(cfg["shear"]["max_time"], cfg["shear"]["max_strain"] / shear_rate)
+    check_every(cfg, cfg["consolidation"]["max_time"] + shear_time,
+                "consolidation.max_time, then the shear to shear.max_strain at shear.inertia_number")
     duration = cfg["consolidation"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
     identity = run_identity(cfg, SCHEMA)
     result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),
