@@ -52,6 +52,16 @@ CASES = [
     ("triaxial: one grain", TRIAXIAL, setter("pack.n_grains", 1), "pack.n_grains: a triaxial sample of 1 grain"),
     ("direct shear: three grains", SHEAR, setter("pack.n_grains", 3), "pack.n_grains: a direct shear sample of 3 grains"),
     ("isotropic: two grains", ISOTROPIC, setter("pack.n_grains", 2), "pack.n_grains: an isotropic sample of 2 grains"),
+    # the pack was ignored without a word
+    ("oedometer: initial_state beside [pack]", OEDOMETER, setter("initial_state", "pack/state.npz"),
+     "initial_state: given beside a [pack] table, which the run would ignore"),
+    ("triaxial: initial_state beside [pack]", TRIAXIAL, setter("initial_state", "pack/state.npz"), "[pack] table"),
+    # the servo's area, speed and gain were ignored without a word
+    ("scene: servo without a stress", DROP, setter("walls.0.servo", {"stress": [], "area": 1e-4, "max_speed": 1e-3}),
+     ("walls[0].servo.stress: empty or not given, so the wall has no servo and its servo.area, servo.max_speed "
+      "would be ignored")),
+    ("scene: servo's gain alone", DROP, setter("walls.0.servo", {"gain": 0.5}),
+     "walls[0].servo.stress: empty or not given, so the wall has no servo and its servo.gain would be ignored"),
 ]
 
 

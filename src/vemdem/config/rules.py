@@ -103,3 +103,19 @@ def _check_every_within_run(cfg: dict) -> None:
         key, seconds = length
         raise ConfigError(f"output.every: must not exceed {key} ({seconds:g} s), got {every:g}")
 
+
+def check_given(raw: dict) -> None:
+    """Rules on what a config writes out, not on the values it ends with (run after the schema,
+    so the tables are tables): keys that would be ignored without a word."""
+    pack = raw.get("pack")
+    if raw.get("initial_state") and isinstance(pack, dict) and pack:
+        # the run starts from the file: a [pack] beside it (an example's, say) was never settled
+        raise ConfigError("initial_state: given beside a [pack] table, which the run would ignore (it starts from "
+                          "initial_state); delete the [pack] table, or initial_state to settle that pack")  # fmt: skip
+    for i, wall in enumerate(raw.get("walls") or []):
+        servo = wall.get("servo") if isinstance(wall, dict) else None
+        if isinstance(servo, dict) and not servo.get("stress") and set(servo) - {"stress"}:
+            given = ", ".join(f"servo.{k}" for k in sorted(set(servo) - {"stress"}))
+            raise ConfigError(f"walls[{i}].servo.stress: empty or not given, so the wall has no servo and its {given} "
+                              "would be ignored; give the target stress(es) in Pa, or delete the [walls.servo] "
+                              "table")  # fmt: skip
