@@ -1,7 +1,8 @@
 """Bad input to the laboratory tests (oedometer, triaxial, direct shear, isotropic) as a new user
 writes it: each is refused in one line naming the key (exit status 2), before a pack settles
 where the config alone tells; a pack read from `initial_state` is checked once it is read, before
-any step (docs/servo.md, what a lab test refuses)."""
+any step (docs/servo.md, what a lab test refuses). A sample that comes apart in a run stops it
+with the stage and the key of its target."""
 
 import copy
 import tomllib
@@ -9,6 +10,7 @@ import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from test_bad_input import assert_one_line_error, setter, to_toml
 
@@ -168,4 +170,93 @@ def test_a_sample_of_a_few_grains_runs_with_one_warning_line():
         check_sample(cfg, SimpleNamespace(grains=[None] * 30))
     with pytest.raises(ConfigError, match=r"^initial_state: a triaxial sample of 3 grains .* at least 4 grains"):
         check_sample(cfg, SimpleNamespace(grains=[None] * 3))
+
+
+# ------------------------------------------------------------------ a sample that comes apart
+class HeldServo:
+    """A servo wall of unit area that measures a set force and stands still."""
+
+    def __init__(self, force=1.0):
+        self.force, self.target, self.max_speed, self.keep_secant = force, 0.0, 1.0, False
+        self.motion = SimpleNamespace(speed=0.0)
+
+    @property
+    def stress(self):
+        return self.force
+
+    def measure(self, reactions, ints, floats, t):
+        pass
+
+    def travel_at(self, t):
+        return 0.0
+
+    def steer(self, t):
+        pass
+
+
+def _path(servo, key="stages[1].stress"):
+    from vemdem.lab.path import LoadPath, Stage
+
+    stages = [Stage(1e3, 1.0, key="stages[0].stress"), Stage(1e9, 1.0, key=key)]
+    region = (np.full(3, -1.0), np.full(3, 1.0))
+    path = LoadPath([servo], stages, lambda t, start: 0.0, np.ones(8), np.array([0, 4, 8]), region=region)
+    path.current = 1
+    return path
+
+
+def _after_step(path, x):
+    state = SimpleNamespace(t=0.0125, x=x)
+    info = SimpleNamespace(wall_reactions=None, ints=None, floats=None, iterations=0)
+    path.after_step(state, info)
+
+
+@pytest.mark.parametrize("where,value,problem", [
+    ((5, 2), np.nan, "the sample's state became non-finite at t = 0.0125 s"),
+    ((5, 2), np.inf, "the sample's state became non-finite"),
+    ((6, 0), 2.5, "grain 1 left the cell at t = 0.0125 s: the grains flew apart"),
+    ((1, 1), -3.0, "grain 0 left the cell"),
+])  # fmt: skip
+def test_a_sample_that_comes_apart_stops_the_test_naming_its_stage_and_key(where, value, problem):
+    from vemdem.lab.path import SampleFailed
+
+    x = np.zeros((8, 3))
+    x[where] = value
+    with pytest.raises(SampleFailed) as err:
+        _after_step(_path(HeldServo()), x)
+    assert str(err.value).startswith(f"stage 1 (stages[1].stress = 1e+09 Pa): {problem}")
+    assert "\n" not in str(err.value)
+
+
+def test_a_non_finite_wall_force_stops_the_test_and_a_whole_sample_does_not():
+    from vemdem.lab.path import SampleFailed
+
+    with pytest.raises(SampleFailed, match=r"^stage 1 \(stages\[1\]\.stress = 1e\+09 Pa\): the sample's state became"):
+        _after_step(_path(HeldServo(force=np.inf)), np.zeros((8, 3)))
+    path = _path(HeldServo())
+    _after_step(path, np.full((8, 3), 0.5))  # inside the cell, finite: the stage goes on
+    assert path.current == 1 and path.records[-1].steps == 1
+
+
+@pytest.mark.parametrize("base,table,stage", [(OEDOMETER, "oedometer.csv", "stage 0 (stages[0].stress = 25000 Pa)"),
+                                              (TRIAXIAL, "triaxial.csv", "consolidation (consolidation.stress = 50000 Pa)")])
+def test_a_run_whose_grains_leave_the_cell_stops_in_one_line_without_a_summary(tmp_path, cli, monkeypatch, base, table,
+                                                                               stage):  # fmt: skip
+    """The scenarios hand the path their cell's region and their stages' keys: a region that the
+    pack's top grains are already out of (the cell's upper half cut away) stops the run at its
+    first step, exit status 1 as a run that fails after its start, naming the stage and its key."""
+    from vemdem.lab import cell
+
+    whole = cell.cell_region
+
+    def cut(centre, box, floor, height):
+        lower, upper = whole(centre, box, floor, height)
+        return lower, np.array([upper[0], upper[1], floor + 0.5 * height])
+
+    monkeypatch.setattr(cell, "cell_region", cut)
+    code, _, err = cli("run", _from_state(tmp_path, base), "--out", tmp_path / "out", "--quiet")
+    lines = err.strip().splitlines()
+    assert code == 1 and lines[0].startswith(f"vemdem: run failed: SampleFailed: {stage}: grain "), err
+    assert "left the cell at t = " in lines[0] and "Traceback" not in err
+    assert not (tmp_path / "out" / "summary.json").exists()
+    assert not (tmp_path / "out" / table).exists()  # the failing step's frame, its first, is never written
 

@@ -148,8 +148,8 @@ def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> 
     number servo.inertia_number at the stage's target (rate = speed / height)."""
     inertia = cfg["servo"]["inertia_number"]
     return [Stage(s["stress"], s["max_time"], s["max_strain"],
-                  max_speed=inertia * height * np.sqrt(s["stress"] / density) / grain_size)
-            for s in cfg["stages"]]  # fmt: skip
+                  max_speed=inertia * height * np.sqrt(s["stress"] / density) / grain_size, key=f"stages[{k}].stress")
+            for k, s in enumerate(cfg["stages"])]  # fmt: skip
 
 
 def with_test_law(cfg: dict) -> dict:
@@ -183,7 +183,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     test.bind(scene, out_dir, stages)
     servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
     path = LoadPath([servo], stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
-                    at_end=test.at_stage_end, **servo_options(cfg))  # fmt: skip
+                    at_end=test.at_stage_end, region=test.cell.region, **servo_options(cfg))  # fmt: skip
     frames = Frames("oedometer.csv", HEADER,
                     lambda state, contact: test.row(state, contact, min(path.current, len(stages) - 1), density))
     # a stage begins at the step after the last one ended and ends at the first step past its

@@ -90,9 +90,10 @@ def stages_for(cfg: dict, shear_rate: float) -> list[Stage]:
     """Consolidation by the five servos; shear by the platen at a constant strain rate over the
     consolidated height, the lateral servos holding the confining stress."""
     sigma_c = cfg["consolidation"]["stress"]
-    return [Stage((sigma_c,) * 5, cfg["consolidation"]["max_time"], rates=(None,), name="consolidation"),
+    key = "consolidation.stress"
+    return [Stage((sigma_c,) * 5, cfg["consolidation"]["max_time"], rates=(None,), name="consolidation", key=key),
             Stage((sigma_c,) * 4 + (None,), cfg["shear"]["max_time"], cfg["shear"]["max_strain"],
-                  rates=(shear_rate,), name="shear")]  # fmt: skip
+                  rates=(shear_rate,), name="shear", key=key)]  # fmt: skip
 
 
 def frame_row(cell: BoxCell, path: LoadPath, scene, state, contact, indices: list, density: float) -> list:
@@ -139,7 +140,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     path = LoadPath(servos_for(cell, scene.contact, cfg, density), stages_for(cfg, shear_rate),
                     lambda t, start: strains(cell, start, t)[0], scene.bodies.lumped, scene.bodies.vertex_ptr,
                     drives=[Drive(cell.wall["top"].motion, lambda start: start[1])], mark=mark(cell),
-                    **servo_options(cfg))  # fmt: skip
+                    region=cell.region, **servo_options(cfg))  # fmt: skip
     indices = [scene.contact.wall_names.index(n) for n in LOADED]
     frames = Frames("triaxial.csv", HEADER,
                     lambda state, contact: frame_row(cell, path, scene, state, contact, indices, density))
