@@ -2,7 +2,8 @@
 writes it: each is refused in one line naming the key (exit status 2), before a pack settles
 where the config alone tells; a pack read from `initial_state` is checked once it is read, before
 any step (docs/servo.md, what a lab test refuses). A sample that comes apart in a run stops it
-with the stage and the key of its target."""
+with the stage and the key of its target; a shear test that never loaded its sample reports no
+friction angle instead of a negative one."""
 
 import copy
 import tomllib
@@ -260,3 +261,46 @@ def test_a_run_whose_grains_leave_the_cell_stops_in_one_line_without_a_summary(t
     assert not (tmp_path / "out" / "summary.json").exists()
     assert not (tmp_path / "out" / table).exists()  # the failing step's frame, its first, is never written
 
+
+# ------------------------------------------------------------------ a shear test that never loaded its sample
+def _triaxial_rows(sigma_1, sigma_3, volumetric):
+    from vemdem.analysis.triaxial import HEADER
+
+    n = len(sigma_1)
+    rows = np.zeros((n, len(HEADER)))
+    rows[:, HEADER.index("stage")] = 1
+    rows[:, HEADER.index("axial_strain")] = np.linspace(0.0, 0.03, n)
+    rows[:, HEADER.index("volumetric_strain")] = volumetric
+    rows[:, HEADER.index("sigma_1")], rows[:, HEADER.index("sigma_3")] = sigma_1, sigma_3
+    return rows
+
+
+def test_a_triaxial_whose_platen_never_loaded_the_sample_reports_no_friction_angle():
+    """A short run from an unconsolidated sample: sigma_1 below sigma_3 throughout (once
+    phi_peak_deg = -2.75 and -16.7), the lateral walls still closing in (once a NaN dilatancy
+    angle and a bare arcsin warning)."""
+    from vemdem.analysis.triaxial import triaxial_figures
+
+    axial = np.linspace(0.0, 0.03, 7)
+    out = triaxial_figures(_triaxial_rows(np.linspace(5.0, 1.1e4, 7), np.linspace(1.9e3, 2e4, 7), 2.0 * axial))
+    assert "phi_peak_deg" not in out and "sigma_1_peak_Pa" not in out
+    assert out["peak_error"].startswith("sigma_1 never exceeded sigma_3 in the shear (largest ratio 0.55)")
+    assert "dilatancy_angle_deg" not in out and "shrank faster than the axial strain" in out["dilatancy_error"]
+    # a loaded sample keeps its angle: R = 3 is 30 degrees
+    loaded = triaxial_figures(_triaxial_rows(np.full(7, 3e4), np.full(7, 1e4), -0.1 * axial))
+    assert loaded["phi_peak_deg"] == pytest.approx(30.0) and "peak_error" not in loaded
+
+
+def test_a_shear_without_a_friction_angle_says_so_in_one_warning_line():
+    from vemdem.analysis.direct_shear import peak, peak_stresses
+    from vemdem.scenarios.lab import UnmeasuredWarning, warn_unmeasured
+
+    with pytest.raises(ValueError, match="never rose above 0"):
+        peak(np.linspace(0.0, 1e-3, 5), np.array([-0.2, -0.1, -0.05, np.nan, -0.3]))
+    with pytest.raises(ValueError, match="no peak state"):
+        peak_stresses(np.array([-0.2, -0.1]), np.array([1e3, 1e3]), np.array([-200.0, -100.0]))
+    with pytest.warns(UnmeasuredWarning, match=r"^phi_peak_deg not reported \(summary.json peak_error\): why$"):
+        warn_unmeasured({"peak_error": "why", "E50_error": "other"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_unmeasured({"phi_peak_deg": 35.0, "E50_error": "not the headline"})

@@ -47,7 +47,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from ..lab.shear_box import LOWER, FrameRide, OpeningTooWide, ShearBox
 from .identity import run_identity
-from .lab import check_every, output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options, warn_unmeasured
 
 RESUMABLE = True
 SCHEMA = lab_tables.DIRECT_SHEAR
@@ -118,6 +118,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                             identity=identity, frames=frames, volume=cell.volume, progress=progress,
                             resume=resume)  # fmt: skip
     figures = shear_figures(rows)
+    warn_unmeasured(figures)
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_n = {sigma_n / 1e3:g} kPa, {integrator.name}"
     plot_shear(rows, out_dir / "shear.png", title, figures)
     return write_summary(out_dir, "direct_shear", scene, result, t_start, path.stage_records("end_displacement_share"),

@@ -89,6 +89,20 @@ def check_every(cfg: dict, length: float, what: str) -> None:
                           f"got {every:g}")  # fmt: skip
 
 
+class UnmeasuredWarning(UserWarning):
+    """A shear test's friction angle could not be taken from its frames (summary.json says why)."""
+
+
+def warn_unmeasured(figures: dict) -> None:
+    """One warning line where a shear test reports no peak friction angle: the summary's `*_error`
+    says why, where a negative angle was once reported beside a consolidation warning alone."""
+    for name in ("shear", "peak"):
+        if f"{name}_error" in figures:
+            warnings.warn(UnmeasuredWarning(f"phi_peak_deg not reported (summary.json {name}_error): "
+                                            f"{figures[f'{name}_error']}"), stacklevel=3)  # fmt: skip
+            return
+
+
 def output_of(cfg: dict) -> Output:
     """The `[output]` table as the lab room takes it."""
     return Output(cfg["output"]["every"], cfg["output"]["vtk"])

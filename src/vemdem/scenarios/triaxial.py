@@ -52,7 +52,7 @@ from ..lab.path import Drive, LoadPath, Stage, unbalanced_force
 from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from .identity import run_identity
-from .lab import check_every, output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options, warn_unmeasured
 
 RESUMABLE = True
 SCHEMA = lab_tables.TRIAXIAL
@@ -155,6 +155,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     records = path.stage_records()
     rows = until_sheared(rows, records[1]["end_time"] if len(records) > 1 else None)
     figures = triaxial_figures(rows)
+    warn_unmeasured(figures)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_3 = {sigma_c / 1e3:g} kPa, {integrator.name}"
