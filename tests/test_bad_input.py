@@ -238,6 +238,9 @@ FILE_CASES = {
     # merged into one point by the duplicate-vertex rounding, before the polyhedron's own check
     "nan vertex in a grain file": ("grain.obj", b"v 0 0 0\nv 1e-3 0 0\nv 0 1e-3 0\nv nan 0 1e-3\n"
                                    b"f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", "non-finite coordinates"),
+    # an OverflowError in the surface's checks once, naming no file
+    "grain file at 1e300 m": ("grain.obj", b"v 0 0 0\nv 1e300 0 0\nv 0 1e300 0\nv 0 0 1e300\n"
+                              b"f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", "grain.obj: coordinates beyond 1000 m"),
 }
 
 
@@ -259,6 +262,8 @@ WALL_CASES = {
     # a lid above the grains whose normals face up, away from them: they once fell through it unseen
     "wall mesh facing away": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 0.01\n"
                               b"v -0.01 0.01 0.01\nf 1 2 3\nf 1 3 4\n", "flip = true"),
+    "wall mesh at 1e300 m": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 1e300\n"
+                             b"v -0.01 0.01 0.01\nf 1 3 2\nf 1 4 3\n", "lid.obj: coordinates beyond 1000 m"),
 }
 
 
