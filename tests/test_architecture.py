@@ -39,6 +39,7 @@ FORBIDDEN = {
     "config.checks": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
     "config.lab_tables": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
     "config.rules": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
+    "config.lab_rules": {"model", "vem", "contact", "io", "solver", "scenarios", "driver"},
 }
 
 

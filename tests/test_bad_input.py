@@ -115,7 +115,8 @@ CONFIG_CASES = [
     ("pile: zero grains", PILE, setter("pack.n_grains", 0), "pack.n_grains"),
     ("pile: negative seed", PILE, setter("pack.seed", -1), "pack.seed"),
     ("pile: pack mu_d above mu_s", PILE, setter("pack.mu_d", 2.0), "pack.mu_d"),
-    ("pile: missing initial state", PILE, setter("initial_state", "none/state.npz"), "none/state.npz"),
+    ("pile: missing initial state", PILE, lambda c: (setter("initial_state", "none/state.npz")(c), c.pop("pack")),
+     "none/state.npz"),
     ("pile: box of zero width", PILE, setter("pack.box.width", 0.0), "pack.box.width"),
     ("pile: threshold zero", PILE, setter("settle.kinetic_threshold", 0.0), "settle.kinetic_threshold"),
     ("pile: settle min_time above max_time", PILE, setter("settle.min_time", 5.0), "settle.min_time"),
@@ -237,6 +238,9 @@ FILE_CASES = {
     # merged into one point by the duplicate-vertex rounding, before the polyhedron's own check
     "nan vertex in a grain file": ("grain.obj", b"v 0 0 0\nv 1e-3 0 0\nv 0 1e-3 0\nv nan 0 1e-3\n"
                                    b"f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", "non-finite coordinates"),
+    # an OverflowError in the surface's checks once, naming no file
+    "grain file at 1e300 m": ("grain.obj", b"v 0 0 0\nv 1e300 0 0\nv 0 1e300 0\nv 0 0 1e300\n"
+                              b"f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", "grain.obj: coordinates beyond 1000 m"),
 }
 
 
@@ -258,6 +262,8 @@ WALL_CASES = {
     # a lid above the grains whose normals face up, away from them: they once fell through it unseen
     "wall mesh facing away": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 0.01\n"
                               b"v -0.01 0.01 0.01\nf 1 2 3\nf 1 3 4\n", "flip = true"),
+    "wall mesh at 1e300 m": ("lid.obj", b"v -0.01 -0.01 0.01\nv 0.01 -0.01 0.01\nv 0.01 0.01 1e300\n"
+                             b"v -0.01 0.01 0.01\nf 1 3 2\nf 1 4 3\n", "lid.obj: coordinates beyond 1000 m"),
 }
 
 
@@ -282,6 +288,7 @@ STATE_CASES = {
 def test_bad_initial_state_is_one_line_naming_it(tmp_path, cli, content):
     (tmp_path / "state.npz").write_bytes(content)
     cfg = copy.deepcopy(PILE)
+    del cfg["pack"]  # a [pack] beside initial_state is refused on its own
     cfg["initial_state"] = "state.npz"
     path = tmp_path / "job.toml"
     path.write_text(to_toml(cfg))

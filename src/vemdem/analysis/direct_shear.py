@@ -48,6 +48,8 @@ def peak(x, ratio) -> dict:
     if not np.any(np.isfinite(ratio)):
         raise ValueError("no row with a finite tau / sigma_n: no peak")
     i = int(np.nanargmax(ratio))
+    if ratio[i] <= 0.0:  # a negative angle: the sample never resisted the shear
+        raise ValueError(f"tau / sigma_n never rose above 0 in the shear (largest {ratio[i]:.3g}): no friction angle")
     return {"phi_peak_deg": float(_angle(ratio[i])), "ratio_peak": float(ratio[i]),
             "shear_displacement_at_peak": float(x[i])}  # fmt: skip
 
@@ -97,6 +99,8 @@ def peak_stresses(ratio, sigma_n, tau) -> dict:
     if not np.any(np.isfinite(ratio)):
         raise ValueError("no row with a finite tau / sigma_n: no peak state")
     i = int(np.nanargmax(ratio))
+    if ratio[i] <= 0.0:  # no failure state for an envelope (peak's own refusal)
+        raise ValueError(f"tau / sigma_n never rose above 0 in the shear (largest {ratio[i]:.3g}): no peak state")
     return {"sigma_n_peak_Pa": float(sigma_n[i]), "tau_peak_Pa": float(tau[i])}
 
 

@@ -80,6 +80,10 @@ def peak(axial, sigma_1, sigma_3) -> dict:
     if not np.any(np.isfinite(ratio)):
         raise ValueError("no row with a positive sigma_3: no stress ratio to find a peak of")
     i = int(np.nanargmax(ratio))
+    if ratio[i] <= 1.0:  # its arcsine would be a negative angle: no strength of a compression test
+        raise ValueError(f"sigma_1 never exceeded sigma_3 in the shear (largest ratio {ratio[i]:.3g}): no friction "
+                         "angle; a sample the consolidation did not bring to its confining stress (its end_reason "
+                         "in `stages`), or a shear too short")  # fmt: skip
     return {"phi_peak_deg": friction_angle(ratio[i]), "ratio_peak": float(ratio[i]),
             "axial_strain_at_peak": float(axial[i]), "q_peak": float(np.max(s1 - s3)),
             "sigma_1_peak_Pa": float(s1[i]), "sigma_3_peak_Pa": float(s3[i])}  # fmt: skip
@@ -104,6 +108,9 @@ def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
         raise ValueError(f"{n} rows with a stress ratio in the last {window:g} of axial strain; "
                          "the critical state needs 3")
     r, q, p = ratio[inside], (s1 - s3)[inside], ((s1 + 2.0 * s3) / 3.0)[inside]
+    if np.mean(r) <= 1.0:
+        raise ValueError(f"sigma_1 did not exceed sigma_3 over the last {window:g} of axial strain (mean ratio "
+                         f"{np.mean(r):.3g}): no critical state of a compression test")
     eta = q / p
     return {"phi_cs_deg": friction_angle(np.mean(r)), "phi_cs_spread_deg": float(np.std(friction_angle(r))),
             "q_over_p_cs": float(np.mean(eta)), "q_over_p_cs_spread": float(np.std(eta)), "window_rows": n,
@@ -152,6 +159,9 @@ def dilatancy_angle(axial, volumetric, window: float = 0.02) -> dict:
     its window's centre; negative where the sample only contracted."""
     centres, slopes = dilatancy_slopes(axial, volumetric, window)
     i = int(np.argmin(slopes))  # dilation: eps_v falling; psi grows as the slope falls
+    if slopes[i] > 1.0:  # beyond Bolton's range: the arcsine of less than -1
+        raise ValueError(f"the volume shrank faster than the axial strain throughout (d eps_v / d eps_a at least "
+                         f"{slopes[i]:.3g}): the lateral walls were still closing in, no dilatancy angle")
     return {"dilatancy_angle_deg": bolton_dilatancy(slopes[i]), "axial_strain_at_max_dilatancy": float(centres[i])}
 
 

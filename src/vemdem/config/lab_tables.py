@@ -6,8 +6,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .checks import _in, _stress, with_defaults
-from .schema import REQUIRED, Field, TableList, open_unit_interval, positive
+from .checks import _DURATION, _in, _stress, _within, with_defaults
+from .lab_rules import LID_AREA_FACTOR
+from .schema import REQUIRED, Field, TableList, open_unit_interval
 from .tables import INITIAL_STATE, MODEL, SOLVER, granular_tables, pack_stage
 
 # The servo of a stress-controlled wall (lab/servo.py) and the rule a load path's stage ends by
@@ -28,7 +29,7 @@ SERVO = {
 
 STAGE = {
     "stress": Field(float, REQUIRED, _stress, "target normal stress on the lid (Pa)"),
-    "max_time": Field(float, 1.0, positive, "the stage ends after this much simulated time, reached or not (s)"),
+    "max_time": Field(float, 1.0, _DURATION, "the stage ends after this much simulated time, reached or not (s)"),
     "max_strain": Field(float, 0.6, open_unit_interval,
                         "a loading stage ends when the axial strain passes this (a target the sample cannot reach)"),
 }
@@ -60,7 +61,7 @@ def _start_gap(wall: str) -> Field:
 
 
 def _shear_time() -> Field:
-    return Field(float, 10.0, positive, "shearing ends after this much simulated time in any case (s)")
+    return Field(float, 10.0, _DURATION, "shearing ends after this much simulated time in any case (s)")
 
 
 def _shear_rate(what: str) -> Field:
@@ -71,7 +72,9 @@ def _shear_rate(what: str) -> Field:
 OEDOMETER = lab_schema("oedometer", 0.15, {
     "lid": {
         "gap": _start_gap("the lid"),
-        "area": Field(float, None, positive, "loaded area of the lid (m^2) [the box's cross-section]"),
+        "area": Field(float, None, _within(1e-12, 1e2, "m^2"),
+                      f"loaded area of the lid (m^2), within a factor {LID_AREA_FACTOR:g} of the box's "
+                      "cross-section [the box's cross-section]"),
     },
     "ring": {
         "friction": Field(bool, False, doc="the side walls' friction: false, a lubricated ring (the lid's stress is "
@@ -90,7 +93,8 @@ TRIAXIAL = lab_schema("triaxial", 0.3, {
     "consolidation": {
         "stress": Field(float, REQUIRED, _stress, "the confining stress (Pa): on all five moving walls, then on the "
                         "four lateral ones while the sample is sheared"),
-        "max_time": Field(float, 0.1, positive, "consolidation ends after this much simulated time, reached or not (s)"),
+        "max_time": Field(float, 0.1, _DURATION, "consolidation ends after this much simulated time, reached or not "
+                          "(s)"),
     },
     "shear": {
         "max_strain": Field(float, 0.25, open_unit_interval, "the axial strain (from the consolidated sample) the "
@@ -116,7 +120,7 @@ DIRECT_SHEAR = lab_schema("direct_shear", 0.3, {
     },
     "normal": {
         "stress": Field(float, REQUIRED, _stress, "the normal stress on the lid (Pa), held by its servo"),
-        "max_time": Field(float, 0.1, positive, "the lid's consolidation ends after this much simulated time, "
+        "max_time": Field(float, 0.1, _DURATION, "the lid's consolidation ends after this much simulated time, "
                           "reached or not (s)"),
     },
     "shear": {

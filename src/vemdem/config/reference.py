@@ -254,8 +254,11 @@ class _Page:
             "meaning and unit, and the values it accepts (the bound its check states). Numbers may be "
             "written as integers (`1` for `1.0`); lengths are in metres, times in seconds. Rules that tie "
             "several keys together (for example `contact.mu_d` at most `contact.mu_s`, `solver.dt_min` at most "
-            "`solver.dt_max`, `lid.end` below `lid.start`, the frame count of `output.every`) are checked "
-            "after the keys, by `vemdem.config.rules.check_rules`.",
+            "`solver.dt_max`, `lid.end` below `lid.start`, the frame count of `output.every`, `initial_state` "
+            "never beside a `[pack]` table) are checked after the keys, by `vemdem.config.rules.check_rules`; "
+            "a laboratory test's (`output.every` within its stages' `max_time`, `lid.area` against the box, "
+            "at least 4 grains) by `vemdem.config.lab_rules` ([what a lab test "
+            "refuses](../servo.md#what-a-lab-test-refuses)).",
             "",
             f"This page is generated from `src/vemdem/config/tables.py` and `lab_tables.py`: `{COMMAND}` rewrites it.",
             "",

@@ -4,6 +4,7 @@ key passed its own (scenarios/registry.checked_config). Each raises a ConfigErro
 from __future__ import annotations
 
 from .checks import MAX_FRAMES, NEWTON_ITERATIONS
+from .lab_rules import check_lab_rules, lab_run_length
 from .schema import ConfigError
 
 
@@ -56,6 +57,7 @@ def check_rules(cfg: dict) -> None:
                           f"{[float(v) for v in gravity]}")  # fmt: skip
     _check_frames(cfg)
     _check_every_within_run(cfg)
+    check_lab_rules(cfg)
     lid = cfg.get("lid")
     if isinstance(lid, dict) and "end" in lid and lid["end"] >= lid["start"]:
         raise ConfigError(f"lid.end: must be below lid.start ({lid['start']:g} m), got {lid['end']:g}")
@@ -65,7 +67,9 @@ def _check_frames(cfg: dict) -> None:
     every = cfg.get("output", {}).get("every")
     if every is None:
         return
-    duration = cfg.get("duration") or cfg.get("settle", {}).get("max_time")
+    # a lab test's [settle] is its pack's re-equilibration, not the test: its stages bound it
+    lab = lab_run_length(cfg)
+    duration = lab[1] if lab else cfg.get("duration") or cfg.get("settle", {}).get("max_time")
     if duration is None:
         return
     frames = duration / every
@@ -74,7 +78,8 @@ def _check_frames(cfg: dict) -> None:
                           f"(at most {MAX_FRAMES:,}); choose a larger interval")  # fmt: skip
 
 
-# the scenarios that run for settle.max_time (the others add a tilt, a lift or load stages to it)
+# the scenarios that run for settle.max_time (the others add a tilt, a lift or load stages to it;
+# a lab test's stages bound its run: lab_rules.lab_run_length)
 SETTLE_IS_DURATION = ("pack", "pile_collapse")
 
 
@@ -84,14 +89,33 @@ def _run_length(cfg: dict) -> tuple[str, float] | None:
         return "duration", cfg["duration"]
     if cfg.get("scenario") in SETTLE_IS_DURATION and "max_time" in cfg.get("settle", {}):
         return "settle.max_time", cfg["settle"]["max_time"]
-    return None
+    return lab_run_length(cfg)
 
 
 def _check_every_within_run(cfg: dict) -> None:
     """A frame interval longer than the run: the loop would cut its only frame to the run's end, so
-    the interval asked for is never the one written (a slip of units or of keys)."""
+    the interval asked for is never the one written (a slip of units or of keys). A lab test's
+    stages stop it only at frames: an interval longer than all of them ran a 4-second oedometer
+    for 1,000 seconds of simulated time, or wrote none of its stages' frames."""
     every = cfg.get("output", {}).get("every")
     length = _run_length(cfg)
     if every is not None and length is not None and every > length[1]:
         key, seconds = length
         raise ConfigError(f"output.every: must not exceed {key} ({seconds:g} s), got {every:g}")
+
+
+def check_given(raw: dict) -> None:
+    """Rules on what a config writes out, not on the values it ends with (run after the schema,
+    so the tables are tables): keys that would be ignored without a word."""
+    pack = raw.get("pack")
+    if raw.get("initial_state") and isinstance(pack, dict) and pack:
+        # the run starts from the file: a [pack] beside it (an example's, say) was never settled
+        raise ConfigError("initial_state: given beside a [pack] table, which the run would ignore (it starts from "
+                          "initial_state); delete the [pack] table, or initial_state to settle that pack")  # fmt: skip
+    for i, wall in enumerate(raw.get("walls") or []):
+        servo = wall.get("servo") if isinstance(wall, dict) else None
+        if isinstance(servo, dict) and not servo.get("stress") and set(servo) - {"stress"}:
+            given = ", ".join(f"servo.{k}" for k in sorted(set(servo) - {"stress"}))
+            raise ConfigError(f"walls[{i}].servo.stress: empty or not given, so the wall has no servo and its {given} "
+                              "would be ignored; give the target stress(es) in Pa, or delete the [walls.servo] "
+                              "table")  # fmt: skip

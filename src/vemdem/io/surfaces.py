@@ -18,6 +18,11 @@ import warnings
 from ..contact.walls import MeshWall, Motion
 from ..geometry.polyhedron import GeometryError, Polyhedron
 
+# m: a surface's coordinates lie within a kilometre of the origin, as a config's positions do
+# (config/checks.py MAX_COORDINATE); one of 1e300 overflowed in the surface's checks, an
+# OverflowError that named no file
+MAX_COORDINATE = 1e3
+
 
 def merge_vertices(points: np.ndarray, faces: np.ndarray, rel_tol: float = 1e-9):
     tol = rel_tol * float(np.ptp(points, axis=0).max())
@@ -60,6 +65,11 @@ def _triangles(mesh, path: Path) -> tuple[np.ndarray, np.ndarray]:
         # before merge_vertices, whose rounding would fold every non-finite point into one
         bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0])
         raise GeometryError(f"{path}: non-finite coordinates (vertex {int(used[bad])} of the file)")
+    far = np.abs(points).max(axis=1) > MAX_COORDINATE
+    if far.any():
+        bad = int(np.flatnonzero(far)[0])
+        raise GeometryError(f"{path}: coordinates beyond {MAX_COORDINATE:g} m (vertex {int(used[bad])} of the file, "
+                            f"at {np.abs(points[bad]).max():.3g} m); the file's unit must be the metre")  # fmt: skip
     return points, remap[faces]
 
 

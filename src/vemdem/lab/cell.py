@@ -22,6 +22,16 @@ _SIDES = ((0, (1.0, 0.0, 0.0)), (0, (-1.0, 0.0, 0.0)), (1, (0.0, 1.0, 0.0)), (1,
 _TOP = (2, (0.0, 0.0, -1.0))
 
 
+def cell_region(centre, box, floor: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) corners a sample's vertices never leave while its cell holds it: the cell
+    as built, widened on every side by its largest dimension (room for a wall's travel outwards,
+    a lid backing off, a shear box's lower half). A vertex beyond them has flown out of the cell."""
+    margin = max(box[0], box[1], height)
+    lower = np.array([centre[0] - 0.5 * box[0], centre[1] - 0.5 * box[1], floor]) - margin
+    upper = np.array([centre[0] + 0.5 * box[0], centre[1] + 0.5 * box[1], floor + height]) + margin
+    return lower, upper
+
+
 def mean_grain_size(grains) -> float:
     """The grains' mean equivalent diameter (m): the length a test's rates and gaps are given in."""
     return float(np.mean(equivalent_diameters(np.array([g.volume for g in grains]))))
@@ -52,6 +62,7 @@ class BoxCell:
         self.walls = [_wall(point, normal, name, name in moving, name in frictionless)
                       for point, (_, normal), name in zip(points, (_FLOOR, *_SIDES, _TOP), self.names)]  # fmt: skip
         self.wall = dict(zip(self.names, self.walls))
+        self.region = cell_region((cx, cy), self.box, self.floor, self.height0)
 
     def travel(self, name: str, t: float) -> float:
         """How far a wall has moved into the sample by time t (m); 0 for a wall that stays."""

@@ -40,6 +40,11 @@ class StageNotReached(UserWarning):
     """A stage ended at its time or strain limit, not at its target."""
 
 
+class SampleFailed(RuntimeError):
+    """The sample came apart: its state became non-finite, or a grain left the cell (a force the
+    contact law could not carry). str(e) names the stage, its target and the key that set it."""
+
+
 def _per_wall(values) -> tuple:
     """One value per wall: a single number (or None) stands for one wall."""
     return (values,) if values is None or np.ndim(values) == 0 else tuple(values)
@@ -54,6 +59,7 @@ class Stage:
     rates: tuple = ()  # per drive: its rate (1/s), 0 (held) or None (a servo steers its wall here)
     name: str = ""  # the record's name (summary.json `stages`), where the test names its stages
     limit: str = "max_strain"  # the end reason at max_strain
+    key: str = ""  # where the test's input set its target (a config key), named where the sample fails in it
 
     def __post_init__(self):
         object.__setattr__(self, "stress", _per_wall(self.stress))
@@ -128,6 +134,7 @@ class LoadPath:
     stress_tolerance: float = 0.01
     unbalanced_tolerance: float = 0.01
     at_end: object = None
+    region: tuple | None = None  # (lower, upper) corners no vertex may leave: a grain out of them flew out
     current: int = 0
     records: list = field(default_factory=list)
     start: tuple | None = None  # the test's mark where the current stage began
@@ -169,6 +176,7 @@ class LoadPath:
         for servo in self.servos:
             servo.keep_secant = stage.drives  # a driven sample deforms under the holding walls
             servo.measure(info.wall_reactions, info.ints, info.floats, state.t)
+        self._check_sample(state)
         rec = None if self.done else self._book(state, info)
         self._steer(state.t)
         if rec is not None:
@@ -205,6 +213,32 @@ class LoadPath:
             if not self.done:
                 self._enter(self.current)
         return rec
+
+    def _check_sample(self, state) -> None:
+        """SampleFailed where the sample came apart at this step, before a frame writes it: a
+        non-finite position or wall force (once written as inf in a test's table and summary), or
+        a vertex out of `region` (grains that flew out of the cell; the walls then chase nothing
+        until the stage's max_time)."""
+        low, high = state.x.min(axis=0), state.x.max(axis=0)  # NaN propagates through both
+        forces = [servo.force for servo in self.servos]
+        if np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(np.isfinite(forces)):
+            if self.region is None or (np.all(low >= self.region[0]) and np.all(high <= self.region[1])):
+                return
+            lo, hi = self.region
+            vertex = int(np.flatnonzero(np.any((state.x < lo) | (state.x > hi), axis=1))[0])
+            grain = int(np.searchsorted(self.vertex_ptr, vertex, side="right")) - 1
+            what = f"grain {grain} left the cell at t = {state.t:.6g} s: the grains flew apart"
+        else:
+            what = f"the sample's state became non-finite at t = {state.t:.6g} s"
+        raise SampleFailed(f"{self._label()}: {what} (a force the contact law could not carry); the test stopped "
+                           "there, without a summary: a lower target")  # fmt: skip
+
+    def _label(self) -> str:
+        """The current stage in words: its name or number, its target and the key that set it."""
+        k = min(self.current, len(self.stages) - 1)
+        stage = self.stages[k]
+        target = f"{stage.key} = {stage.target:g} Pa" if stage.key else f"{stage.target:g} Pa"
+        return f"{stage.name or f'stage {k}'} ({target})"
 
     def held(self, servo) -> bool:
         return abs(servo.stress - servo.target) <= self.stress_tolerance * servo.target

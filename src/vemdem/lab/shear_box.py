@@ -16,6 +16,7 @@ import numpy as np
 
 from ..contact.walls import MeshWall, PlaneWall, ServoMotion
 from ..model.bodies import equivalent_diameters
+from .cell import cell_region
 
 LOWER = ("floor", "lower -x", "lower +x", "lower -x plate")  # the walls that move with the lower half
 
@@ -70,6 +71,7 @@ class ShearBox:
         self.walls = self._planes()
         self.lid = self.walls[-1]
         self.area = self.box[0] * self.box[1]
+        self.region = cell_region(self.centre, self.box, self.floor, self.height0)
 
     def _halves(self, layer: float) -> list[MeshWall]:
         """The halves' x sides and the frames' plates: the lower half's walls, then the upper's."""

@@ -47,7 +47,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from ..lab.shear_box import LOWER, FrameRide, OpeningTooWide, ShearBox
 from .identity import run_identity
-from .lab import output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options, warn_unmeasured
 
 RESUMABLE = True
 SCHEMA = lab_tables.DIRECT_SHEAR
@@ -70,9 +70,9 @@ def stages_for(cfg: dict, rate: float) -> list[Stage]:
     """Consolidation by the lid's servo, the halves held; shear by the lower half at a constant
     shear rate, the upper frame riding with the lid."""
     sigma_n = cfg["normal"]["stress"]
-    return [Stage(sigma_n, cfg["normal"]["max_time"], rates=(0.0, 0.0), name="consolidation"),
+    return [Stage(sigma_n, cfg["normal"]["max_time"], rates=(0.0, 0.0), name="consolidation", key="normal.stress"),
             Stage(sigma_n, cfg["shear"]["max_time"], cfg["shear"]["max_displacement"], rates=(rate, 1.0),
-                  name="shear", limit="max_displacement")]  # fmt: skip
+                  name="shear", limit="max_displacement", key="normal.stress")]  # fmt: skip
 
 
 def frame_row(cell: ShearBox, path: LoadPath, scene, state, contact, walls: tuple, density: float) -> list:
@@ -101,7 +101,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     cap = quasi_static_rate(cfg["servo"]["inertia_number"], sigma_n, density, cell.grain_size) * cell.height0
     servo = Servo(scene.contact, cell.lid, cell.area, gain=cfg["servo"]["gain"], max_speed=cap, target=sigma_n)
     path = LoadPath([servo], stages_for(cfg, rate), lambda t, start: cell.displacements(start, t)[0] / cell.box[0],
-                    scene.bodies.lumped, scene.bodies.vertex_ptr, mark=cell.mark, **servo_options(cfg),
+                    scene.bodies.lumped, scene.bodies.vertex_ptr, mark=cell.mark, region=cell.region,
+                    **servo_options(cfg),
                     drives=[Drive(cell.drive, lambda start: cell.height0), FrameRide(cell)])  # fmt: skip
     names = scene.contact.wall_names
     walls = (names.index("lid"), [names.index(n) for n in LOWER])
@@ -109,12 +110,15 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                     lambda state, contact: frame_row(cell, path, scene, state, contact, walls, density))
     speed = rate * cell.height0
     shear_time = min(cfg["shear"]["max_time"], cell.travel_max / speed)
+    check_every(cfg, cfg["normal"]["max_time"] + shear_time,
+                "normal.max_time, then the shear to shear.max_displacement at shear.inertia_number")
     duration = cfg["normal"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
     identity = run_identity(cfg, SCHEMA)
     result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),
                             identity=identity, frames=frames, volume=cell.volume, progress=progress,
                             resume=resume)  # fmt: skip
     figures = shear_figures(rows)
+    warn_unmeasured(figures)
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_n = {sigma_n / 1e3:g} kPa, {integrator.name}"
     plot_shear(rows, out_dir / "shear.png", title, figures)
     return write_summary(out_dir, "direct_shear", scene, result, t_start, path.stage_records("end_displacement_share"),

@@ -48,8 +48,9 @@ def stages_for(cfg: dict, cell: BoxCell, density: float) -> list[Stage]:
     lengths = np.array([cell.height0, *(cell.box[0],) * 2, *(cell.box[1],) * 2, cell.height0])
     inertia = cfg["servo"]["inertia_number"]
     return [Stage((s["stress"],) * 6, s["max_time"], s["max_strain"],
-                  max_speed=tuple(quasi_static_rate(inertia, s["stress"], density, cell.grain_size) * lengths))
-            for s in cfg["stages"]]  # fmt: skip
+                  max_speed=tuple(quasi_static_rate(inertia, s["stress"], density, cell.grain_size) * lengths),
+                  key=f"stages[{k}].stress")
+            for k, s in enumerate(cfg["stages"])]  # fmt: skip
 
 
 def row(cell: BoxCell, path: LoadPath, scene, state, contact, indices: list) -> list:
@@ -87,7 +88,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
         return {"mean_stress_end": float(np.mean([s.stress for s in servos])), "volumetric_strain_end": strain(state.t)}
 
     path = LoadPath(servos, stages_for(cfg, cell, scene.material.density), strain, scene.bodies.lumped,
-                    scene.bodies.vertex_ptr, at_end=at_end, **servo_options(cfg))  # fmt: skip
+                    scene.bodies.vertex_ptr, at_end=at_end, region=cell.region, **servo_options(cfg))  # fmt: skip
     indices = [scene.contact.wall_names.index(n) for n in WALLS]
     frames = Frames("isotropic.csv", HEADER, lambda state, contact: row(cell, path, scene, state, contact, indices))
     duration = sum(s["max_time"] for s in cfg["stages"]) + len(cfg["stages"]) * cfg["output"]["every"]

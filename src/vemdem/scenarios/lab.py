@@ -4,10 +4,13 @@ the contact law set for the test's load, and the typed options their tables give
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..config import ConfigError
 from ..config.build import scene_from, solver_options_from
+from ..config.lab_rules import few_grains_note, sample_problem
 from ..lab.run import Output
 from ..solver.api import make_integrator
 from .pack import initial_state_from
@@ -52,10 +55,52 @@ def sample_in(cfg: dict, out_dir: Path, base_dir, progress, resume: bool, cell_o
     `stress` (contact_at_stress)."""
     t_start, out_dir = time.perf_counter(), Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
+    check_sample(cfg, initial)
     cell = cell_of(cfg, initial)
     law = contact_at_stress(cfg, stress, cell.grain_size)
     scene = scene_from(initial.grains, law, cell.walls, cell.meshes)
     return Sample(t_start, out_dir, initial, state_path, cell, scene, make_integrator(solver_options_from(cfg), scene))
+
+
+class SmallSampleWarning(UserWarning):
+    """A lab sample of fewer grains than config.lab_rules.FEW_GRAINS: its measures are a few contacts'."""
+
+
+def check_sample(cfg: dict, initial) -> None:
+    """The grains a lab test starts from, counted: too few are refused (config.lab_rules; a
+    `[pack]` is refused before it settles, a pack read from `initial_state` here), a few tens draw
+    one warning line."""
+    n, key = len(initial.grains), "initial_state" if cfg["initial_state"] else "pack.n_grains"
+    problem = sample_problem(cfg["scenario"], n, key)
+    if problem:
+        raise ConfigError(problem)
+    note = few_grains_note(cfg["scenario"], n)
+    if note:
+        warnings.warn(SmallSampleWarning(f"{key}: {note}"), stacklevel=3)
+
+
+def check_every(cfg: dict, length: float, what: str) -> None:
+    """`output.every` against the test's own length where its stages end before their max_time (a
+    shear that ends at its strain): a longer interval would write no frame of the test. The config's
+    rule (config.lab_rules) bounds it by the max_time alone, before a pack is settled."""
+    every = cfg["output"]["every"]
+    if every > length:
+        raise ConfigError(f"output.every: must not exceed the test's length ({length:.3g} s: {what}), "
+                          f"got {every:g}")  # fmt: skip
+
+
+class UnmeasuredWarning(UserWarning):
+    """A shear test's friction angle could not be taken from its frames (summary.json says why)."""
+
+
+def warn_unmeasured(figures: dict) -> None:
+    """One warning line where a shear test reports no peak friction angle: the summary's `*_error`
+    says why, where a negative angle was once reported beside a consolidation warning alone."""
+    for name in ("shear", "peak"):
+        if f"{name}_error" in figures:
+            warnings.warn(UnmeasuredWarning(f"phi_peak_deg not reported (summary.json {name}_error): "
+                                            f"{figures[f'{name}_error']}"), stacklevel=3)  # fmt: skip
+            return
 
 
 def output_of(cfg: dict) -> Output:

@@ -42,8 +42,9 @@ from ..analysis.oedometer import (
     read_rows,
     turning_points,
 )
-from ..config import lab_tables
+from ..config import ConfigError, lab_tables
 from ..config.build import scene_from, solver_options_from
+from ..config.lab_rules import lid_area_problem
 from ..geometry.mass import body_volumes
 from ..lab.cell import SIDES, BoxCell
 from ..lab.path import LoadPath, Stage, unbalanced_force
@@ -51,7 +52,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
-from .lab import contact_at_stress, output_of, servo_options
+from .lab import check_sample, contact_at_stress, output_of, servo_options
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
@@ -147,8 +148,8 @@ def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> 
     number servo.inertia_number at the stage's target (rate = speed / height)."""
     inertia = cfg["servo"]["inertia_number"]
     return [Stage(s["stress"], s["max_time"], s["max_strain"],
-                  max_speed=inertia * height * np.sqrt(s["stress"] / density) / grain_size)
-            for s in cfg["stages"]]  # fmt: skip
+                  max_speed=inertia * height * np.sqrt(s["stress"] / density) / grain_size, key=f"stages[{k}].stress")
+            for k, s in enumerate(cfg["stages"])]  # fmt: skip
 
 
 def with_test_law(cfg: dict) -> dict:
@@ -170,7 +171,11 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     cfg = with_test_law(cfg)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
+    check_sample(cfg, initial)
     test = Oedometer(cfg, initial)
+    problem = lid_area_problem(cfg["lid"]["area"], test.cell.box[0] * test.cell.box[1], f"the box of {state_path}")
+    if problem:
+        raise ConfigError(problem)
     scene = scene_from(initial.grains, cfg, test.walls)
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density
@@ -178,7 +183,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     test.bind(scene, out_dir, stages)
     servo = Servo(scene.contact, test.lid, test.area, gain=cfg["servo"]["gain"])
     path = LoadPath([servo], stages, test.strain, scene.bodies.lumped, scene.bodies.vertex_ptr,
-                    at_end=test.at_stage_end, **servo_options(cfg))  # fmt: skip
+                    at_end=test.at_stage_end, region=test.cell.region, **servo_options(cfg))  # fmt: skip
     frames = Frames("oedometer.csv", HEADER,
                     lambda state, contact: test.row(state, contact, min(path.current, len(stages) - 1), density))
     # a stage begins at the step after the last one ended and ends at the first step past its

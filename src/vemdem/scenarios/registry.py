@@ -6,7 +6,7 @@ from importlib import import_module
 from importlib.resources import files
 
 from ..config import ConfigError, apply_schema
-from ..config.rules import check_rules
+from ..config.rules import check_given, check_rules
 from ..config.tables import REMOVED
 
 SCENARIOS = {
@@ -93,6 +93,7 @@ def checked_config(raw: dict) -> tuple[dict, object]:
     module = scenario_module(raw["scenario"])
     cfg = apply_schema(raw, module.SCHEMA, removed=REMOVED)
     check_rules(cfg)
+    check_given(raw)
     return cfg, module
 
 

@@ -52,7 +52,7 @@ from ..lab.path import Drive, LoadPath, Stage, unbalanced_force
 from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo, quasi_static_rate
 from .identity import run_identity
-from .lab import output_of, sample_in, servo_options
+from .lab import check_every, output_of, sample_in, servo_options, warn_unmeasured
 
 RESUMABLE = True
 SCHEMA = lab_tables.TRIAXIAL
@@ -90,9 +90,10 @@ def stages_for(cfg: dict, shear_rate: float) -> list[Stage]:
     """Consolidation by the five servos; shear by the platen at a constant strain rate over the
     consolidated height, the lateral servos holding the confining stress."""
     sigma_c = cfg["consolidation"]["stress"]
-    return [Stage((sigma_c,) * 5, cfg["consolidation"]["max_time"], rates=(None,), name="consolidation"),
+    key = "consolidation.stress"
+    return [Stage((sigma_c,) * 5, cfg["consolidation"]["max_time"], rates=(None,), name="consolidation", key=key),
             Stage((sigma_c,) * 4 + (None,), cfg["shear"]["max_time"], cfg["shear"]["max_strain"],
-                  rates=(shear_rate,), name="shear")]  # fmt: skip
+                  rates=(shear_rate,), name="shear", key=key)]  # fmt: skip
 
 
 def frame_row(cell: BoxCell, path: LoadPath, scene, state, contact, indices: list, density: float) -> list:
@@ -139,11 +140,13 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     path = LoadPath(servos_for(cell, scene.contact, cfg, density), stages_for(cfg, shear_rate),
                     lambda t, start: strains(cell, start, t)[0], scene.bodies.lumped, scene.bodies.vertex_ptr,
                     drives=[Drive(cell.wall["top"].motion, lambda start: start[1])], mark=mark(cell),
-                    **servo_options(cfg))  # fmt: skip
+                    region=cell.region, **servo_options(cfg))  # fmt: skip
     indices = [scene.contact.wall_names.index(n) for n in LOADED]
     frames = Frames("triaxial.csv", HEADER,
                     lambda state, contact: frame_row(cell, path, scene, state, contact, indices, density))
     shear_time = min(cfg["shear"]["max_time"], cfg["shear"]["max_strain"] / shear_rate)
+    check_every(cfg, cfg["consolidation"]["max_time"] + shear_time,
+                "consolidation.max_time, then the shear to shear.max_strain at shear.inertia_number")
     duration = cfg["consolidation"]["max_time"] + shear_time + 2 * cfg["output"]["every"]
     identity = run_identity(cfg, SCHEMA)
     result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),
@@ -152,6 +155,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     records = path.stage_records()
     rows = until_sheared(rows, records[1]["end_time"] if len(records) > 1 else None)
     figures = triaxial_figures(rows)
+    warn_unmeasured(figures)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_3 = {sigma_c / 1e3:g} kPa, {integrator.name}"
