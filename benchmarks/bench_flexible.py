@@ -6,6 +6,7 @@ mass scaling (docs/selective-mass-scaling.md).
     python benchmarks/bench_flexible.py --lambdas auto,0 --max-time 0.05
     python benchmarks/bench_flexible.py --examples pile24 --lambdas 1e4,3e6 --set contact.mu_s=0 \
         --set contact.mu_d=0 --max-time 0.1          # the energy books' table (docs/selective-mass-scaling.md)
+    python benchmarks/bench_flexible.py --auto-table  # what "auto" gives under the weight's and the lab laws
 
 For each example: its pack is settled once with rigid grains (the example as shipped, into
 OUT/NAME/pack-run), then the test runs from that pack (`initial_state`) with rigid grains and with
@@ -103,6 +104,23 @@ def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings:
     return rows
 
 
+def auto_table(size: float = 0.9e-3, E: float = 90e9, density: float = 2200.0) -> None:
+    """What "auto" chooses for 0.9 mm sand grains under the weight's law and the laws a laboratory
+    test sets for its stress (reference force 2 sigma d^2): no run, the grains' spectra only."""
+    from vemdem.contact.defaults import default_contact_laws  # noqa: PLC0415
+    from vemdem.geometry import sand_grain  # noqa: PLC0415
+    from vemdem.model.scene import Scene  # noqa: PLC0415
+    from vemdem.model.selective import auto_selective_scaling  # noqa: PLC0415
+    from vemdem.vem.material import Material  # noqa: PLC0415
+
+    grains = [sand_grain(size, 30, seed=s) for s in range(6)]
+    for label, stress in (("the weight's", None), ("25 kPa", 25e3), ("100 kPa", 100e3), ("1 MPa", 1e6)):
+        force = {} if stress is None else {"reference_force": 2.0 * stress * size**2}
+        law, friction = default_contact_laws(size, E, density, 9.81, **force)
+        auto = auto_selective_scaling(Scene.build(grains, Material(E, 0.16, density), law, friction))
+        print(json.dumps({"law": label, **auto}))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--examples", default="pile", help="comma-separated example names")
@@ -112,7 +130,11 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                         help="a config key of every run after the pack (repeatable)")
+    parser.add_argument("--auto-table", action="store_true", help='print what "auto" chooses under four laws, and stop')
     args = parser.parse_args()
+    if args.auto_table:
+        auto_table()
+        return
     lambdas = [x if x == "auto" else float(x) for x in args.lambdas.split(",")]
     print(f"threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, load average {os.getloadavg()[0]:.1f}")
     head_on(1.0, selective_mass_scaling=1e6)  # warm-up: the flexible explicit step's kernels compile here
