@@ -238,6 +238,23 @@ def test_a_non_finite_wall_force_stops_the_test_and_a_whole_sample_does_not():
     assert path.current == 1 and path.records[-1].steps == 1
 
 
+@pytest.mark.parametrize(("step", "warned"), [(4e-9, True), (2e-7, False)])
+def test_a_stage_its_steps_project_to_days_is_named_in_a_warning(step, warned):
+    """A 1e9 Pa target on rigid grains steps at about 4e-9 s: 2.5e8 steps to a max_time of 1 s."""
+    from vemdem.lab.path import PROJECTED_AFTER, StageTooLong
+
+    path = _path(HeldServo())
+    info = SimpleNamespace(wall_reactions=None, ints=None, floats=None, iterations=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for k in range(PROJECTED_AFTER + 5):
+            path.after_step(SimpleNamespace(t=k * step, x=np.zeros((8, 3))), info)
+    lines = [str(w.message) for w in caught if issubclass(w.category, StageTooLong)]
+    assert len(lines) == (1 if warned else 0)
+    if warned:
+        assert lines[0].startswith("stage 1 (stages[1].stress = 1e+09 Pa): 2.5e+08 steps to its end (1 s)"), lines
+
+
 @pytest.mark.parametrize("base,table,stage", [(OEDOMETER, "oedometer.csv", "stage 0 (stages[0].stress = 25000 Pa)"),
                                               (TRIAXIAL, "triaxial.csv", "consolidation (consolidation.stress = 50000 Pa)")])
 def test_a_run_whose_grains_leave_the_cell_stops_in_one_line_without_a_summary(tmp_path, cli, monkeypatch, base, table,

@@ -31,6 +31,7 @@ its target, the steps and the Newton iterations: the records `stage_records` ret
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -38,6 +39,18 @@ import numpy as np
 
 class StageNotReached(UserWarning):
     """A stage ended at its time or strain limit, not at its target."""
+
+
+class StageTooLong(UserWarning):
+    """A stage's steps so far project to days of wall time before its max_time."""
+
+
+# A stage is projected to its end (its max_time, or its strain limit at its drive's rate) from its
+# mean step over its first PROJECTED_AFTER steps; past MANY_STEPS it would run for hours at the few
+# hundred to few thousand steps per second a laboratory sample takes (a target the contact law
+# carries only at steps of nanoseconds)
+PROJECTED_AFTER = 1000
+MANY_STEPS = 1e7
 
 
 class SampleFailed(RuntimeError):
@@ -199,6 +212,8 @@ class LoadPath:
             rec.work += 0.5 * (self._last[1] + servo.force) * (travel - self._last[0])
         self._last = (travel, servo.force)
         rec.steps += 1
+        if rec.steps == PROJECTED_AFTER:
+            self._warn_if_endless(stage, rec, state.t)
         rec.newton_iterations += int(info.iterations)
         if stage.stress[-1] is not None:
             past = (servo.stress - rec.target) if rec.loading else (rec.target - servo.stress)
@@ -232,6 +247,19 @@ class LoadPath:
             what = f"the sample's state became non-finite at t = {state.t:.6g} s"
         raise SampleFailed(f"{self._label()}: {what} (a force the contact law could not carry); the test stopped "
                            "there, without a summary: a lower target")  # fmt: skip
+
+    def _warn_if_endless(self, stage, rec, t: float) -> None:
+        """StageTooLong where the stage's mean step so far would take more than MANY_STEPS to its
+        end: legal, and it may still reach its target first, so a warning, not a stop."""
+        rate = max((abs(r) for r in stage.rates if r), default=0.0)
+        horizon = min(stage.max_time, stage.max_strain / rate) if rate else stage.max_time
+        mean = (t - rec.start_time) / rec.steps
+        steps = horizon / mean if mean > 0 else np.inf
+        if steps > MANY_STEPS:
+            warnings.warn(StageTooLong(
+                f"{self._label()}: {steps:.2g} steps to its end ({horizon:g} s) at its mean step so far "
+                f"({mean:.2g} s), hours of wall time unless it reaches its target first: the contact law carries "
+                "this load only at such steps; a lower target or a shorter max_time"), stacklevel=2)  # fmt: skip
 
     def _label(self) -> str:
         """The current stage in words: its name or number, its target and the key that set it."""
