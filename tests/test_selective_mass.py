@@ -76,6 +76,32 @@ def test_translations_and_rotations_keep_their_real_inertia(grain, rng):
                            rtol=1e-7, atol=1e-9 * np.abs(f).sum())  # fmt: skip
 
 
+def test_a_contact_point_meets_the_rigid_response_of_the_grain_where_it_stands(grain, rng):
+    """The scaled pair inverse mass's rigid part, 1/M + (r x n) . J^-1 (r x n) at the contact point
+    with the inertia of the current placement (grain_frames, as the explicit step takes it), is the
+    dense projector Phi (Phi^T M Phi)^-1 Phi^T seen by a point force spread on three vertices."""
+    from vemdem.vem.selective_mass import grain_frames  # noqa: PLC0415
+
+    b = grain.bodies
+    m = b.lumped
+    x = b.reference + 1e-5 * rng.standard_normal(b.reference.shape)  # not the reference placement
+    phi = rigid_modes(x, m)
+    M = np.diag(np.repeat(m, 3))
+    projector = phi @ np.linalg.solve(phi.T @ M @ phi, phi.T)
+    centre, axes, moments = grain_frames(x, m, b.vertex_ptr)
+    J_inv = axes[0] @ np.diag(1.0 / moments[0]) @ axes[0].T
+    for _ in range(5):
+        nodes = rng.choice(len(m), 3, replace=False)
+        w = rng.dirichlet(np.ones(3))
+        n = rng.standard_normal(3)
+        n /= np.linalg.norm(n)
+        force = np.zeros((len(m), 3))
+        force[nodes] = w[:, None] * n
+        dense = force.ravel() @ projector @ force.ravel()
+        q = np.cross(w @ x[nodes] - centre[0], n)
+        assert 1.0 / m.sum() + q @ J_inv @ q == pytest.approx(dense, rel=1e-9)
+
+
 def test_free_fall_and_rest_are_exact(grain):
     b = grain.bodies
     g = np.array([0.0, 0.0, -9.81])

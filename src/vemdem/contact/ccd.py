@@ -261,7 +261,7 @@ def impact_step_limit(gap: np.ndarray, rate: np.ndarray, m_eq: np.ndarray, law_p
 
 
 def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray, law_params,
-                        m_eq: np.ndarray, zeta: float, mobility: np.ndarray | None = None,
+                        m_eq: np.ndarray, zeta: float, rigid_inverse: np.ndarray | None = None,
                         lam: float = 0.0) -> float:  # fmt: skip
     """The central-difference stability limit of every active pair as the explicit integrator sees
     it, its damping included:
@@ -273,32 +273,26 @@ def damped_contact_step(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.n
 
     The damping acts on vertex masses 15-30 times lighter than the grain masses it is scaled
     with, so zeta_p is 2-4 for zeta = 0.5: a step from zeta alone was 1.5-2.3 times too long and
-    impacts gained energy. With selective mass scaling lam (and the grains' rigid point
-    mobilities) the pairs' inverse masses are `scaled_pair_inverse_masses`. inf without pairs."""
+    impacts gained energy. With selective mass scaling lam the pairs' inverse masses are
+    `scaled_pair_inverse_masses`, given the pairs' rigid inverse masses. inf without pairs."""
     if len(ints) == 0:
         return np.inf
-    inverse = scaled_pair_inverse_masses(inv_mass_all, ints, floats, mobility, lam)
+    inverse = scaled_pair_inverse_masses(inv_mass_all, ints, floats, rigid_inverse, lam)
     return damped_pair_step(inverse, floats, law_params, m_eq, zeta)
 
 
 def scaled_pair_inverse_masses(inv_mass_all: np.ndarray, ints: np.ndarray, floats: np.ndarray,
-                               mobility: np.ndarray, lam: float) -> np.ndarray:  # fmt: skip
+                               rigid_inverse: np.ndarray | None, lam: float) -> np.ndarray:  # fmt: skip
     """1/m_eff of every pair along its normal on flexible grains whose deformation modes carry
-    (1 + lam) times their inertia (selective mass scaling, vem/selective_mass.py): a side's point
-    p = sum_i w_i x_i meets (sum_i w_i^2 / m_i + lam mob_g) / (1 + lam) at most, mob_g the grain's
-    rigid point mobility 1/M + rho^2 / I_min (`mobility`, per grain; a wall side adds nothing).
-    The rigid part is the grain's as a whole, not the nodes' share of it: spread over a face's
-    three nodes by their weights it would count a third of it."""
+    (1 + lam) times their inertia (selective mass scaling, vem/selective_mass.py): the pair's
+    point p = sum_i w_i x_i meets (sum_i w_i^2 / m_i + lam rigid) / (1 + lam), exactly, with
+    `rigid` the pair's inverse mass as rigid grains of the lumped masses (`rigid_pair_inverse_masses`
+    with each grain's current centroid and inertia): M_s^-1's rigid part acting on a point force
+    is the grain's rigid response at that point, not the nodes' shares of it."""
     inv = pair_inverse_masses(inv_mass_all, ints, floats)
     if lam == 0.0 or len(ints) == 0:
         return inv
-    G = len(mobility)
-    rigid = np.zeros(len(ints))
-    for side in (GRAIN_A, GRAIN_B):
-        g = ints[:, side]
-        grain = g < G
-        rigid[grain] += mobility[g[grain]]
-    return (inv + lam * rigid) / (1.0 + lam)
+    return (inv + lam * rigid_inverse) / (1.0 + lam)
 
 
 def pair_gaps(floats: np.ndarray) -> np.ndarray:

@@ -37,6 +37,7 @@ from ..vem.material import Material
 from ..vem.selective_mass import (
     corotational_drift,
     deformation_kinetic_energy,
+    grain_frames,
     rigid_point_mobility,
     selective_accelerations,
 )
@@ -195,6 +196,11 @@ class VemBodies:
     def rigid_mobility(self) -> np.ndarray:
         """(G,) 1/M + rho^2 / I_min of every grain (vem.selective_mass.rigid_point_mobility)."""
         return rigid_point_mobility(self.reference, self.lumped, self.vertex_ptr)
+
+    def rigid_frames(self, x: np.ndarray):
+        """(centroids, principal axes, principal moments) of every grain's lumped masses at x
+        (vem.selective_mass.grain_frames): its rigid inertia as it stands."""
+        return grain_frames(x, self.lumped, self.vertex_ptr)
 
     def deformation_kinetic_energy(self, x: np.ndarray, v: np.ndarray) -> float:
         """1/2 sum m |v - v_rigid|^2 of all grains: the part of the kinetic energy that selective

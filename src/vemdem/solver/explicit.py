@@ -42,6 +42,7 @@ from ..contact.ccd import (
     pair_gaps,
     plane_closing_time,
     plane_distances,
+    rigid_pair_inverse_masses,
 )
 from ..contact.model import PenetrationError
 from ..model.bodies import InvertedElementError
@@ -78,7 +79,6 @@ class ExplicitIntegrator:
         # a contact meets their scaled deformation inertia too (bodies.node_inverse_masses)
         self.grain_dt = float(bodies.critical_steps().min())
         self.scaling = getattr(bodies, "deformation_scaling", 0.0)
-        self.mobility = bodies.rigid_mobility() if self.scaling else np.zeros(0)
         self._lumped = bodies.lumped[:, None]  # gravity on the lumped masses: free fall is exact
         n_wall_nodes = len(scene.contact.wall_nodes(0.0))
         self.inv_mass_all = np.concatenate([1.0 / bodies.lumped, np.zeros(n_wall_nodes)])  # walls: rigid
@@ -132,11 +132,22 @@ class ExplicitIntegrator:
         dt = self.grain_dt
         if len(ints):
             contact = self.scene.contact
+            rigid = self._rigid_pair_inverse(state, ints, floats) if self.scaling else None
             dt = min(dt, damped_contact_step(self.inv_mass_all, ints, floats, contact.law_params,
                                              contact.masses_of_pairs(ints), contact.friction.damping_ratio,
-                                             self.mobility, self.scaling))  # fmt: skip
+                                             rigid, self.scaling))  # fmt: skip
         dt *= self.params.safety
         return min(dt, self.approach_limit(state, ints, floats))
+
+    def _rigid_pair_inverse(self, state: State, ints, floats) -> np.ndarray:
+        """Every pair's inverse mass along its normal as rigid grains of the lumped masses, in
+        their current placement: what the scaled deformation modes leave a contact as lambda
+        grows. The bound 1/M + rho^2 / I_min in its place kept the steps of a 40-grain triaxial
+        at 2.3 times the rigid grains'."""
+        centre, axes, moments = self.scene.bodies.rigid_frames(state.x)
+        mass = np.add.reduceat(self.scene.bodies.lumped, self.scene.bodies.vertex_ptr[:-1])
+        x_all = self.scene.contact.all_positions(state.x, state.t)
+        return rigid_pair_inverse_masses(x_all, ints, floats, centre, axes, mass, moments)
 
     def approach_limit(self, state: State, ints, floats) -> float:
         """Longest step in which no pair closes more than `approach_fraction` f of its gap:

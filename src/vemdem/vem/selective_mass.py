@@ -245,3 +245,19 @@ def rigid_point_mobility(reference: np.ndarray, m: np.ndarray, vertex_ptr: np.nd
     r2 = np.sum(r * r, axis=1)
     J = np.add.reduceat(m[:, None, None] * (r2[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :]), starts)
     return 1.0 / mass + np.maximum.reduceat(r2, starts) / np.linalg.eigvalsh(J)[:, 0]
+
+
+def grain_frames(x: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray):
+    """(centroids (G, 3), principal axes (G, 3, 3) as columns, principal moments (G, 3)) of the
+    lumped masses m at positions x: the grains' rigid inertia where they are now, the form
+    contact.ccd.rigid_pair_inverse_masses takes."""
+    starts = vertex_ptr[:-1]
+    mass = np.add.reduceat(m, starts)
+    grain = np.repeat(np.arange(len(mass)), np.diff(vertex_ptr))
+    c = np.add.reduceat(m[:, None] * x, starts, axis=0) / mass[:, None]
+    r = x - c[grain]
+    r2 = np.sum(r * r, axis=1)
+    J = np.add.reduceat(m[:, None, None] * (r2[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :]), starts)
+    moments, axes = np.linalg.eigh(J)
+    # contiguous: the compiled pair kernel then takes the rigid grains' array types (one compilation)
+    return np.ascontiguousarray(c), np.ascontiguousarray(axes), np.ascontiguousarray(moments)
