@@ -88,7 +88,7 @@ def test_a_contact_point_meets_the_rigid_response_of_the_grain_where_it_stands(g
     phi = rigid_modes(x, m)
     M = np.diag(np.repeat(m, 3))
     projector = phi @ np.linalg.solve(phi.T @ M @ phi, phi.T)
-    centre, axes, moments = grain_frames(x, m, b.vertex_ptr)
+    _, centre, axes, moments = grain_frames(x, m, b.vertex_ptr)
     J_inv = axes[0] @ np.diag(1.0 / moments[0]) @ axes[0].T
     for _ in range(5):
         nodes = rng.choice(len(m), 3, replace=False)

@@ -198,7 +198,7 @@ class VemBodies:
         return rigid_point_mobility(self.reference, self.lumped, self.vertex_ptr)
 
     def rigid_frames(self, x: np.ndarray):
-        """(centroids, principal axes, principal moments) of every grain's lumped masses at x
+        """(masses, centroids, principal axes, principal moments) of every grain's lumped masses at x
         (vem.selective_mass.grain_frames): its rigid inertia as it stands."""
         return grain_frames(x, self.lumped, self.vertex_ptr)
 

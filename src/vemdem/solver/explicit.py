@@ -144,8 +144,7 @@ class ExplicitIntegrator:
         their current placement: what the scaled deformation modes leave a contact as lambda
         grows. The bound 1/M + rho^2 / I_min in its place kept the steps of a 40-grain triaxial
         at 2.3 times the rigid grains'."""
-        centre, axes, moments = self.scene.bodies.rigid_frames(state.x)
-        mass = np.add.reduceat(self.scene.bodies.lumped, self.scene.bodies.vertex_ptr[:-1])
+        mass, centre, axes, moments = self.scene.bodies.rigid_frames(state.x)
         x_all = self.scene.contact.all_positions(state.x, state.t)
         return rigid_pair_inverse_masses(x_all, ints, floats, centre, axes, mass, moments)
 

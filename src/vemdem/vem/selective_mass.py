@@ -231,26 +231,9 @@ def deformation_kinetic_energy(x: np.ndarray, v: np.ndarray, m: np.ndarray, vert
     return total.sum()
 
 
-def rigid_point_mobility(reference: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray) -> np.ndarray:
-    """(G,) 1/M + rho^2 / I_min of every grain: a bound on how fast any of its vertices moves along
-    a unit force when the grain moves rigidly (rho its farthest vertex from the centroid, I_min its
-    smallest principal moment of the lumped masses). Both are invariant under rotation, so the
-    reference placement serves the whole run; a scaled grain's contacts see this mobility as
-    lambda grows (ccd.selective_pair_inverse_masses)."""
-    starts = vertex_ptr[:-1]
-    mass = np.add.reduceat(m, starts)
-    grain = np.repeat(np.arange(len(mass)), np.diff(vertex_ptr))
-    c = np.add.reduceat(m[:, None] * reference, starts, axis=0) / mass[:, None]
-    r = reference - c[grain]
-    r2 = np.sum(r * r, axis=1)
-    J = np.add.reduceat(m[:, None, None] * (r2[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :]), starts)
-    return 1.0 / mass + np.maximum.reduceat(r2, starts) / np.linalg.eigvalsh(J)[:, 0]
-
-
-def grain_frames(x: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray):
-    """(centroids (G, 3), principal axes (G, 3, 3) as columns, principal moments (G, 3)) of the
-    lumped masses m at positions x: the grains' rigid inertia where they are now, the form
-    contact.ccd.rigid_pair_inverse_masses takes."""
+def _lumped_inertia(x: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray):
+    """(masses (G,), centroids (G, 3), squared distances of the vertices from their centroid (N,),
+    inertia tensors about the centroids (G, 3, 3)) of every grain's lumped masses at x."""
     starts = vertex_ptr[:-1]
     mass = np.add.reduceat(m, starts)
     grain = np.repeat(np.arange(len(mass)), np.diff(vertex_ptr))
@@ -258,6 +241,24 @@ def grain_frames(x: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray):
     r = x - c[grain]
     r2 = np.sum(r * r, axis=1)
     J = np.add.reduceat(m[:, None, None] * (r2[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :]), starts)
+    return mass, c, r2, J
+
+
+def rigid_point_mobility(reference: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray) -> np.ndarray:
+    """(G,) 1/M + rho^2 / I_min of every grain: a bound on how fast any of its vertices moves along
+    a unit force when the grain moves rigidly (rho its farthest vertex from the centroid, I_min its
+    smallest principal moment of the lumped masses). Both are invariant under rotation, so the
+    reference placement serves the whole run: the bound the explicit step's layer entry takes
+    (VemBodies.node_inverse_masses); a pair's own step takes its exact rigid response (grain_frames)."""
+    mass, _, r2, J = _lumped_inertia(reference, m, vertex_ptr)
+    return 1.0 / mass + np.maximum.reduceat(r2, vertex_ptr[:-1]) / np.linalg.eigvalsh(J)[:, 0]
+
+
+def grain_frames(x: np.ndarray, m: np.ndarray, vertex_ptr: np.ndarray):
+    """(masses (G,), centroids (G, 3), principal axes (G, 3, 3) as columns, principal moments
+    (G, 3)) of the lumped masses m at positions x: the grains' rigid inertia where they are now,
+    the form contact.ccd.rigid_pair_inverse_masses takes."""
+    mass, c, _, J = _lumped_inertia(x, m, vertex_ptr)
     moments, axes = np.linalg.eigh(J)
     # contiguous: the compiled pair kernel then takes the rigid grains' array types (one compilation)
-    return np.ascontiguousarray(c), np.ascontiguousarray(axes), np.ascontiguousarray(moments)
+    return mass, np.ascontiguousarray(c), np.ascontiguousarray(axes), np.ascontiguousarray(moments)
