@@ -7,9 +7,10 @@ mass scaling (docs/selective-mass-scaling.md).
     python benchmarks/bench_flexible.py --examples pile24 --lambdas 1e4,3e6 --set contact.mu_s=0 \
         --set contact.mu_d=0 --max-time 0.1          # the energy books' table (docs/selective-mass-scaling.md)
     python benchmarks/bench_flexible.py --auto-table  # what "auto" gives under the weight's and the lab laws
+    python benchmarks/bench_flexible.py --examples triaxial,oedometer --seeds 1,2,3   # the lab, three packs
 
 For each example: its pack is settled once with rigid grains (the example as shipped, into
-OUT/NAME/pack-run), then the test runs from that pack (`initial_state`) with rigid grains and with
+OUT/NAME/pack-run/pack), then the test runs from that pack (`initial_state`) with rigid grains and with
 flexible grains on the explicit step under each selective mass scaling of `--lambdas` ("auto" or
 numbers; 0 is the unscaled lumped mass, bound by the grains' own vibration: give it a short
 `--max-time`). A short warm-up compiles the kernels first, so the wall times compare models, not
@@ -17,7 +18,9 @@ compilers. Prints one row per run: steps, simulated time, wall time, grain-steps
 the headline figures, and the flexible/rigid wall-time ratio on the same pack. Nothing asserts a
 timing. `pile24` is `bench_pile.py`'s 24-grain pile at the real density (minutes, not the main job's tens of
 minutes); `--set TABLE.KEY=VALUE` changes a key of every run (e.g. `solver.safety=0.1`,
-`contact.damping_ratio=0`); each run's energy books are printed (`balance_error`).
+`contact.damping_ratio=0`); each run's energy books are printed (`balance_error`). `--seeds` runs
+each example on the packs of those `[pack] seed`s and prints, per run kind, the mean and spread of
+the headline figures and of the wall-time ratio over the seeds.
 """
 
 from __future__ import annotations
@@ -30,6 +33,9 @@ import tomllib
 import warnings
 from pathlib import Path
 
+import numpy as np
+
+from vemdem.scenarios.pack import initial_state_from
 from vemdem.scenarios.registry import checked_config, example_text
 from vemdem.verification.impact import head_on
 
@@ -66,6 +72,16 @@ def _run(raw: dict, out: Path) -> dict:
         return module.run(cfg, out, base_dir=None, progress=None)
 
 
+def _settle(raw: dict, out: Path) -> Path:
+    """The example's pack, settled with rigid grains into OUT/pack (its scenario's own pack stage),
+    and its state file."""
+    cfg, module = checked_config(copy.deepcopy(raw))
+    pack_cfg = module.pack_config_for(cfg) if hasattr(module, "pack_config_for") else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return initial_state_from(cfg, None, out, None, False, pack_cfg)[1]
+
+
 def _variant(raw: dict, pack_state: Path | None, grains: str, lam, max_time: float | None) -> dict:
     raw = copy.deepcopy(raw)
     if pack_state is not None:
@@ -91,17 +107,49 @@ def _row(name: str, label: str, summary: dict) -> dict:
             "balance_error": (summary.get("energy") or {}).get("balance_error"), **headline}  # fmt: skip
 
 
-def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings: list[str]) -> list[dict]:
+def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings: list[str],
+          seed: int | None = None) -> list[dict]:  # fmt: skip
     raw = _example(name)
     raw.pop("initial_state", None)
-    rigid = _variant(raw, None, "rigid", 0.0, None)
-    _run(rigid, out / "pack-run")  # settles the pack (the example's own, with rigid grains)
-    pack = out / "pack-run" / "pack" / "state.npz"
+    if seed is not None:
+        raw["pack"]["seed"] = seed
+        out = out / f"seed{seed}"
+    pack = _settle(_variant(raw, None, "rigid", 0.0, None), out / "pack-run")
     rows = [_row(name, "rigid", _run(_apply(_variant(raw, pack, "rigid", 0.0, max_time), settings), out / "rigid"))]
     for lam in lambdas:
         summary = _run(_apply(_variant(raw, pack, "flexible", lam, max_time), settings), out / f"flexible-{lam}")
         rows.append(_row(name, f"flexible, SMS {lam}", summary))
+    rigid_wall = rows[0]["wall_s"]
+    for r in rows:
+        r["seed"] = seed
+        r["wall_ratio_to_rigid"] = r["wall_s"] / rigid_wall
     return rows
+
+
+def over_seeds(rows: list[dict]) -> list[dict]:
+    """Per example and run kind: the mean and standard deviation over the seeds of every number a
+    row carries (headline figures, steps, the wall-time ratio), and the flexible runs' differences
+    from the rigid run on the same pack (seed by seed, then averaged)."""
+    out = []
+    for name in dict.fromkeys(r["example"] for r in rows):
+        mine = [r for r in rows if r["example"] == name]
+        rigid = {r["seed"]: r for r in mine if r["run"] == "rigid"}
+        for label in dict.fromkeys(r["run"] for r in mine):
+            runs = [r for r in mine if r["run"] == label]
+            entry = {"example": name, "run": label, "seeds": [r["seed"] for r in runs]}
+            for key, value in runs[0].items():
+                values = [r.get(key) for r in runs]
+                if isinstance(value, (int, float)) and key != "seed" and None not in values:
+                    entry[key] = [float(np.mean(values)), float(np.std(values))]
+                    if label != "rigid" and key in _headline_keys():
+                        diffs = [r[key] - rigid[r["seed"]][key] for r in runs if rigid[r["seed"]].get(key) is not None]
+                        entry[f"{key}_minus_rigid"] = [float(np.mean(diffs)), float(np.std(diffs))]
+            out.append(entry)
+    return out
+
+
+def _headline_keys() -> set:
+    return {k for keys in HEADLINES.values() for k in keys}
 
 
 def auto_table(size: float = 0.9e-3, E: float = 90e9, density: float = 2200.0) -> None:
@@ -130,6 +178,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                         help="a config key of every run after the pack (repeatable)")
+    parser.add_argument("--seeds", default=None, help="comma-separated [pack] seeds: each example on each seed's pack")
     parser.add_argument("--auto-table", action="store_true", help='print what "auto" chooses under four laws, and stop')
     args = parser.parse_args()
     if args.auto_table:
@@ -138,14 +187,19 @@ def main() -> None:
     lambdas = [x if x == "auto" else float(x) for x in args.lambdas.split(",")]
     print(f"threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, load average {os.getloadavg()[0]:.1f}")
     head_on(1.0, selective_mass_scaling=1e6)  # warm-up: the flexible explicit step's kernels compile here
+    seeds = [int(s) for s in args.seeds.split(",")] if args.seeds else [None]
     rows = []
     for name in args.examples.split(","):
-        rows += bench(name, args.out / name, lambdas, args.max_time, args.set)
-        rigid = next(r for r in rows if r["example"] == name and r["run"] == "rigid")
-        for r in rows:
-            if r["example"] == name:
-                r["wall_ratio_to_rigid"] = r["wall_s"] / rigid["wall_s"]
-                print(json.dumps(r))
+        for seed in seeds:
+            new = bench(name, args.out / name, lambdas, args.max_time, args.set, seed)
+            for r in new:
+                print(json.dumps(r), flush=True)
+            rows += new
+    if args.seeds:
+        rows += [{"over_seeds": True, **entry} for entry in over_seeds(rows)]
+        for entry in rows:
+            if entry.get("over_seeds"):
+                print(json.dumps(entry))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 

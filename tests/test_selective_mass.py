@@ -271,3 +271,26 @@ def test_rigid_grains_take_auto_as_nothing_to_scale(tmp_path, cli):
     config.write_text(tomli_w.dumps(raw))
     code, _, err = cli("run", config, "--out", tmp_path / "out2", "--quiet")
     assert code == 2 and "rigid grains have no deformation modes" in err
+
+
+def test_a_quasi_static_test_loads_its_grains_over_its_strain_rate_not_a_contact():
+    """A lab test's loading time is the time its fastest drive (lab.servo.quasi_static_rate at the
+    test's inertia number and stress) strains neighbouring grains by one activation gap over their
+    size; "auto" then reaches the contact bound, which a collision's duration kept it below."""
+    from vemdem.lab.servo import quasi_static_rate
+    from vemdem.model.selective import auto_selective_scaling
+
+    inertia, stress, d = 5e-4, 50e3, 0.9e-3  # the rate goes as 1/d and the strain to cross a gap as 1/d
+    law, friction = default_contact_laws(d, 90e9, 2200.0, 9.81, reference_force=2.0 * stress * d**2)  # the lab's
+    grain = Scene.build([sand_grain(d, 20, seed=3)], Material(90e9, 0.16, 2200.0), law, friction, gravity=(0, 0, 0))
+    collision = auto_selective_scaling(grain)
+    lab = auto_selective_scaling(grain, (inertia, stress))
+    rate = quasi_static_rate(inertia, stress, grain.material.density, d)
+    expected = grain.contact.law.activation_gap / d / rate
+    assert lab["loading_time_s"] == pytest.approx(expected, rel=1e-12)
+    assert lab["loading_time_from"] == "the test's strain rate"
+    assert collision["loading_time_from"] == "a contact's duration"
+    assert lab["loading_time_s"] > 100 * collision["loading_time_s"]
+    assert collision["bound"] == "vibration period" and collision["lambda"] < collision["lambda_contact"]
+    assert lab["bound"] == "contact step" and lab["lambda"] == lab["lambda_contact"]
+    assert lab["scaled_period_s"] <= lab["period_fraction"] * lab["loading_time_s"]

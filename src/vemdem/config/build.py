@@ -151,9 +151,11 @@ def activation_gap_from(cfg: dict, size: float) -> float:
     return cfg["contact"]["activation_gap"] or GAP_FRACTION * size
 
 
-def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scene:
+def scene_from(grains: list, cfg: dict, planes: list, meshes: list = (), quasi_static: tuple | None = None) -> Scene:
     """A scene of placed grains and walls with the config's material, vem, contact and solver
-    (mass scaling) settings; the contact laws' scales come from the mean grain size."""
+    (mass scaling) settings; the contact laws' scales come from the mean grain size.
+    `quasi_static` (I, sigma): a laboratory test's drive, which sets selective mass scaling's
+    loading time (model.selective.auto_selective_scaling)."""
     scaling = cfg["solver"]["mass_scaling"]
     # mass scaling: every mass-born quantity (inertia, weight, contact force scale) grows alike, so
     # rigid-grain kinematics are unchanged and only the elastic (and explicit-step) time scales move
@@ -168,7 +170,7 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = ()) -> Scen
         raise ConfigError(f"contact: {exc}") from None
     scene = Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
                         vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
-    scale_deformation_modes(scene, cfg["solver"]["selective_mass_scaling"], cfg["solver"]["integrator"])
+    scale_deformation_modes(scene, cfg["solver"]["selective_mass_scaling"], cfg["solver"]["integrator"], quasi_static)
     if scaling > 1.0:
         warn_if_mass_scaling_shows(scene)
     return scene
@@ -178,7 +180,7 @@ class SelectiveMassScalingNotice(UserWarning):
     """The explicit step runs with selectively scaled grains: a model change, named in the log."""
 
 
-def scale_deformation_modes(scene: Scene, requested, integrator: str) -> None:
+def scale_deformation_modes(scene: Scene, requested, integrator: str, quasi_static: tuple | None = None) -> None:
     """[solver] selective_mass_scaling: "auto" (model.selective, recorded in the scene for
     summary.json) or lambda; flexible grains on the explicit step only ("auto" is 0 elsewhere)."""
     scene.selective_auto = None
@@ -186,7 +188,7 @@ def scale_deformation_modes(scene: Scene, requested, integrator: str) -> None:
         return
     lam = requested
     if requested == "auto":
-        scene.selective_auto = auto_selective_scaling(scene)
+        scene.selective_auto = auto_selective_scaling(scene, quasi_static)
         lam = scene.selective_auto["lambda"]
     scene.bodies.scale_deformation_inertia(lam)
     how = f' ("auto": bound by the {scene.selective_auto["bound"]})' if requested == "auto" else ""

@@ -10,10 +10,17 @@ contact step at the law's switch gap,
     lambda_contact = (dt_contact / dt_grain)^2 - 1,   dt_contact = 2 / sqrt(k_switch 2 mob_max),
 
 and never more than keeps the scaled slowest vibration period within PERIOD_FRACTION of the
-loading time (a contact's duration t_c = pi sqrt(m / 2 k_switch), the shortest time over which
-anything in a run loads a grain):
+loading time t_load, the shortest time over which anything in the run loads a grain:
 
-    lambda_cap = (PERIOD_FRACTION t_c / T_1)^2 - 1.
+    lambda_cap = (PERIOD_FRACTION t_load / T_1)^2 - 1.
+
+In a run where grains collide (a collapse, a pour, an impact) t_load is a contact's duration
+t_c = pi sqrt(m / 2 k_switch). A laboratory test is driven quasi-statically: its walls and drives
+strain the sample no faster than the rate that gives their inertia number I at the test's stress
+sigma, rate = I sqrt(sigma / rho) / d, so neighbours close on each other at rate x d and a
+contact's load changes over the time they take to cross one activation gap (lab_loading_time):
+
+    t_load = gbar / (I sqrt(sigma / rho)).
 
 The step's accuracy sets no bound of its own since the drift carries each grain's rigid motion out
 exactly (vem.selective_mass.corotational_drift): a 24-grain frictionless collapse closes its energy
@@ -33,16 +40,29 @@ from ..contact.law import normal_force
 # test's), and lost 6.5 % at 2.7 under a law 21 times stiffer; docs/selective-mass-scaling.md
 PERIOD_FRACTION = 3.0
 
-def auto_selective_scaling(scene) -> dict:
+def lab_loading_time(scene, inertia_number: float, stress: float) -> float:
+    """gbar / (I sqrt(sigma / rho)): the time a sample strained at the quasi-static rate of inertia
+    number I at stress sigma (lab.servo.quasi_static_rate) takes to close one activation gap
+    between neighbouring grains, at the density integrated."""
+    speed = inertia_number * np.sqrt(stress / scene.material.density)
+    return float(scene.contact.law.activation_gap / speed)
+
+
+def auto_selective_scaling(scene, quasi_static: tuple[float, float] | None = None) -> dict:
     """The "auto" lambda of a scene of flexible grains (unscaled when called) and what set it:
-    summary.json's selective_mass_scaling_auto."""
+    summary.json's selective_mass_scaling_auto. `quasi_static` (I, sigma): a laboratory test's
+    largest inertia number and its stress, whose strain rate sets the loading time
+    (lab_loading_time); None: a contact's duration does."""
     bodies = scene.bodies
     grain_step = float(bodies.critical_steps().min())
     period = float(bodies.vibration_periods().max())
     law = scene.contact.law
     k_switch = float(normal_force(law.switch_gap, law.packed())[1])
     contact_step = 2.0 / np.sqrt(k_switch * 2.0 * float(bodies.rigid_mobility().max()))
-    loading_time = float(scene.contact_durations().min())
+    if quasi_static is None:
+        loading_time, loaded_by = float(scene.contact_durations().min()), "a contact's duration"
+    else:
+        loading_time, loaded_by = lab_loading_time(scene, *quasi_static), "the test's strain rate"
     lam_contact = max((contact_step / grain_step) ** 2 - 1.0, 0.0)
     lam_cap = max((PERIOD_FRACTION * loading_time / period) ** 2 - 1.0, 0.0)
     bounds = {"contact step": lam_contact, "vibration period": lam_cap}
@@ -56,6 +76,7 @@ def auto_selective_scaling(scene) -> dict:
         "grain_step_s": grain_step,
         "contact_step_s": contact_step,
         "loading_time_s": loading_time,
+        "loading_time_from": loaded_by,
         "period_fraction": PERIOD_FRACTION,
         "scaled_period_s": period * np.sqrt(1.0 + lam),
     }

@@ -34,6 +34,14 @@ def contact_at_stress(cfg: dict, stress: float, grain_size: float) -> dict:
     return {**cfg, "contact": {**cfg["contact"], "reference_force": force}}
 
 
+def quasi_static_drive(cfg: dict, stress: float) -> tuple[float, float]:
+    """(I, sigma): the largest inertia number the test's servos and drives move at (`servo` and,
+    where the test shears, `shear`), at the test's stress: the fastest the test loads its grains,
+    which sets selective mass scaling's loading time (model.selective.lab_loading_time)."""
+    rates = [cfg["servo"]["inertia_number"]] + [cfg[t]["inertia_number"] for t in ("shear",) if t in cfg]
+    return max(rates), stress
+
+
 @dataclass(frozen=True)
 class Sample:
     """What a lab test starts from: when it started (`t_start`, for the summary's wall time), its
@@ -52,13 +60,13 @@ class Sample:
 def sample_in(cfg: dict, out_dir: Path, base_dir, progress, resume: bool, cell_of, stress: float) -> Sample:
     """The pack (settled into DIR/pack, or `initial_state`), the cell `cell_of(cfg, initial)` around
     it, and the scene of its grains in the cell's walls under the contact law set for the test's
-    `stress` (contact_at_stress)."""
+    `stress` (contact_at_stress), its selective mass scaling loaded at the test's rate (quasi_static_drive)."""
     t_start, out_dir = time.perf_counter(), Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     check_sample(cfg, initial)
     cell = cell_of(cfg, initial)
     law = contact_at_stress(cfg, stress, cell.grain_size)
-    scene = scene_from(initial.grains, law, cell.walls, cell.meshes)
+    scene = scene_from(initial.grains, law, cell.walls, cell.meshes, quasi_static_drive(cfg, stress))
     return Sample(t_start, out_dir, initial, state_path, cell, scene, make_integrator(solver_options_from(cfg), scene))
 
 

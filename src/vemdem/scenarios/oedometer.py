@@ -52,7 +52,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
-from .lab import check_sample, contact_at_stress, output_of, servo_options
+from .lab import check_sample, contact_at_stress, output_of, quasi_static_drive, servo_options
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
@@ -176,7 +176,8 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     problem = lid_area_problem(cfg["lid"]["area"], test.cell.box[0] * test.cell.box[1], f"the box of {state_path}")
     if problem:
         raise ConfigError(problem)
-    scene = scene_from(initial.grains, cfg, test.walls)
+    largest = max(s["stress"] for s in cfg["stages"])
+    scene = scene_from(initial.grains, cfg, test.walls, quasi_static=quasi_static_drive(cfg, largest))
     integrator = make_integrator(solver_options_from(cfg), scene)
     density = scene.material.density
     stages = stages_from(cfg, density, test.height0, test.grain_size)
