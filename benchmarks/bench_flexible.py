@@ -7,7 +7,8 @@ mass scaling (docs/selective-mass-scaling.md).
     python benchmarks/bench_flexible.py --examples pile24 --lambdas 1e4,3e6 --set contact.mu_s=0 \
         --set contact.mu_d=0 --max-time 0.1          # the energy books' table (docs/selective-mass-scaling.md)
     python benchmarks/bench_flexible.py --auto-table  # what "auto" gives under the weight's and the lab laws
-    python benchmarks/bench_flexible.py --examples triaxial,oedometer --seeds 1,2,3   # the lab, three packs
+    python benchmarks/bench_flexible.py --examples triaxial --seeds 1,2,3   # the lab, three packs
+    python benchmarks/bench_flexible.py --examples oedometer --seeds 1,2,3 --stage-time 0.02
 
 For each example: its pack is settled once with rigid grains (the example as shipped, into
 OUT/NAME/pack-run/pack), then the test runs from that pack (`initial_state`) with rigid grains and with
@@ -57,7 +58,10 @@ def _example(name: str) -> dict:
     return tomllib.loads(example_text(name))
 
 
-def _apply(raw: dict, settings: list[str]) -> dict:
+def _apply(raw: dict, settings: list[str], stage_time: float | None = None) -> dict:
+    if stage_time is not None:
+        for stage in raw.get("stages", []):
+            stage["max_time"] = stage_time
     for item in settings:
         key, value = item.split("=", 1)
         table, name = key.split(".")
@@ -108,16 +112,18 @@ def _row(name: str, label: str, summary: dict) -> dict:
 
 
 def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings: list[str],
-          seed: int | None = None) -> list[dict]:  # fmt: skip
+          seed: int | None = None, stage_time: float | None = None) -> list[dict]:  # fmt: skip
     raw = _example(name)
     raw.pop("initial_state", None)
     if seed is not None:
         raw["pack"]["seed"] = seed
         out = out / f"seed{seed}"
     pack = _settle(_variant(raw, None, "rigid", 0.0, None), out / "pack-run")
-    rows = [_row(name, "rigid", _run(_apply(_variant(raw, pack, "rigid", 0.0, max_time), settings), out / "rigid"))]
+    rigid = _apply(_variant(raw, pack, "rigid", 0.0, max_time), settings, stage_time)
+    rows = [_row(name, "rigid", _run(rigid, out / "rigid"))]
     for lam in lambdas:
-        summary = _run(_apply(_variant(raw, pack, "flexible", lam, max_time), settings), out / f"flexible-{lam}")
+        flexible = _apply(_variant(raw, pack, "flexible", lam, max_time), settings, stage_time)
+        summary = _run(flexible, out / f"flexible-{lam}")
         rows.append(_row(name, f"flexible, SMS {lam}", summary))
     rigid_wall = rows[0]["wall_s"]
     for r in rows:
@@ -178,6 +184,8 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                         help="a config key of every run after the pack (repeatable)")
+    parser.add_argument("--stage-time", type=float, default=None,
+                        help="every [[stages]] max_time (s): an oedometer's stages end there if not at rest before")
     parser.add_argument("--seeds", default=None, help="comma-separated [pack] seeds: each example on each seed's pack")
     parser.add_argument("--auto-table", action="store_true", help='print what "auto" chooses under four laws, and stop')
     args = parser.parse_args()
@@ -191,7 +199,7 @@ def main() -> None:
     rows = []
     for name in args.examples.split(","):
         for seed in seeds:
-            new = bench(name, args.out / name, lambdas, args.max_time, args.set, seed)
+            new = bench(name, args.out / name, lambdas, args.max_time, args.set, seed, args.stage_time)
             for r in new:
                 print(json.dumps(r), flush=True)
             rows += new

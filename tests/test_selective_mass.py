@@ -293,4 +293,23 @@ def test_a_quasi_static_test_loads_its_grains_over_its_strain_rate_not_a_contact
     assert lab["loading_time_s"] > 100 * collision["loading_time_s"]
     assert collision["bound"] == "vibration period" and collision["lambda"] < collision["lambda_contact"]
     assert lab["bound"] == "contact step" and lab["lambda"] == lab["lambda_contact"]
+    # the per-stress law carries 2 sigma d^2 at its switch gap: its strongest contacts are past it
+    assert lab["lambda_contact"] == pytest.approx(collision["lambda_contact"], rel=1e-12)
     assert lab["scaled_period_s"] <= lab["period_fraction"] * lab["loading_time_s"]
+
+
+@pytest.mark.parametrize("n1", [1.5, 2.0])
+def test_the_contact_bound_takes_the_laws_stiffness_where_it_carries_the_force(n1):
+    """stiffness_at_force against the law's own force and stiffness at the gap where it carries that
+    force, found by bisection; above the switch force, the switch gap's stiffness."""
+    from scipy.optimize import brentq
+
+    from vemdem.contact.law import InterfaceLaw, normal_force
+    from vemdem.model.selective import stiffness_at_force
+
+    law = InterfaceLaw(9e-6, 1e9, n1, 0.3, -2.0)
+    p = law.packed()
+    for force in (1e-4, 1e-2, 0.5 * law.switch_force):
+        gap = brentq(lambda g: normal_force(g, p)[0] - force, law.switch_gap, law.activation_gap, xtol=1e-18)
+        assert stiffness_at_force(law, force) == pytest.approx(normal_force(gap, p)[1], rel=1e-8)
+    assert stiffness_at_force(law, 3.0 * law.switch_force) == pytest.approx(normal_force(law.switch_gap, p)[1])

@@ -5,9 +5,13 @@ The explicit step of flexible grains is the shortest of the grains' own critical
 contacts'. Scaling the deformation modes by 1 + lambda lengthens the first by sqrt(1 + lambda);
 the second tends to the rigid grains' contact step as lambda grows (a contact then meets the
 grain's rigid mobility). "auto" takes the lambda at which the grains' step reaches the rigid
-contact step at the law's switch gap,
+contact step of the stiffest contact the run expects,
 
-    lambda_contact = (dt_contact / dt_grain)^2 - 1,   dt_contact = 2 / sqrt(k_switch 2 mob_max),
+    lambda_contact = (dt_contact / dt_grain)^2 - 1,   dt_contact = 2 / sqrt(k 2 mob_max),
+
+k the law's stiffness at its switch gap, or in a laboratory test at the force of its strongest
+contacts, CHAIN_FORCE sigma d^2 (stiffness_at_force: below the switch force under the material's
+law, whose stiffness grows with the force),
 
 and never more than keeps the scaled slowest vibration period within PERIOD_FRACTION of the
 loading time t_load, the shortest time over which anything in the run loads a grain:
@@ -33,12 +37,29 @@ from __future__ import annotations
 import numpy as np
 
 from ..contact.law import normal_force
+from .bodies import equivalent_diameters
 
 # The scaled slowest vibration period may reach this many contact durations: a head-on impact of
 # two 0.9 mm grains at 90 GPa kept its restitution within 0.2 % up to 5 durations under the
 # weight's law, within 1.2 % at 2.3 (3.5 % at 7) under a law 2,000 times stiffer (a 100 kPa
 # test's), and lost 6.5 % at 2.7 under a law 21 times stiffer; docs/selective-mass-scaling.md
 PERIOD_FRACTION = 3.0
+
+# A laboratory test's strongest contacts carry about this many sigma d^2 (sigma its stress): the
+# mean force of a pack near its peak is about 2.5 sigma_3 d^2 (pi d^2 p / (phi z), p = 2 sigma_3) and
+# the largest of a few hundred contacts about six times the mean
+CHAIN_FORCE = 10.0
+
+
+def stiffness_at_force(law, force: float) -> float:
+    """The law's normal stiffness where its penalty branch carries `force`, k = n1 eps1 delta^(n1 - 1)
+    with eps1 delta^n1 = force; the switch gap's stiffness for a force the penalty does not reach."""
+    f_switch, k_switch = normal_force(law.switch_gap, law.packed())
+    if force >= f_switch:
+        return float(k_switch)
+    n1 = law.penalty_exponent
+    return float(n1 * law.penalty * (force / law.penalty) ** ((n1 - 1.0) / n1))
+
 
 def lab_loading_time(scene, inertia_number: float, stress: float) -> float:
     """gbar / (I sqrt(sigma / rho)): the time a sample strained at the quasi-static rate of inertia
@@ -57,12 +78,14 @@ def auto_selective_scaling(scene, quasi_static: tuple[float, float] | None = Non
     grain_step = float(bodies.critical_steps().min())
     period = float(bodies.vibration_periods().max())
     law = scene.contact.law
-    k_switch = float(normal_force(law.switch_gap, law.packed())[1])
-    contact_step = 2.0 / np.sqrt(k_switch * 2.0 * float(bodies.rigid_mobility().max()))
     if quasi_static is None:
+        k_contact = float(normal_force(law.switch_gap, law.packed())[1])
         loading_time, loaded_by = float(scene.contact_durations().min()), "a contact's duration"
     else:
+        size = float(np.mean(equivalent_diameters(bodies.volume)))
+        k_contact = stiffness_at_force(law, CHAIN_FORCE * quasi_static[1] * size**2)
         loading_time, loaded_by = lab_loading_time(scene, *quasi_static), "the test's strain rate"
+    contact_step = 2.0 / np.sqrt(k_contact * 2.0 * float(bodies.rigid_mobility().max()))
     lam_contact = max((contact_step / grain_step) ** 2 - 1.0, 0.0)
     lam_cap = max((PERIOD_FRACTION * loading_time / period) ** 2 - 1.0, 0.0)
     bounds = {"contact step": lam_contact, "vibration period": lam_cap}
@@ -75,6 +98,7 @@ def auto_selective_scaling(scene, quasi_static: tuple[float, float] | None = Non
         "lambda_period_cap": lam_cap,
         "grain_step_s": grain_step,
         "contact_step_s": contact_step,
+        "contact_stiffness_N_per_m": k_contact,
         "loading_time_s": loading_time,
         "loading_time_from": loaded_by,
         "period_fraction": PERIOD_FRACTION,
