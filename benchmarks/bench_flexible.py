@@ -171,8 +171,10 @@ def auto_table(size: float = 0.9e-3, E: float = 90e9, density: float = 2200.0) -
     for label, stress in (("the weight's", None), ("25 kPa", 25e3), ("100 kPa", 100e3), ("1 MPa", 1e6)):
         force = {} if stress is None else {"reference_force": 2.0 * stress * size**2}
         law, friction = default_contact_laws(size, E, density, 9.81, **force)
-        auto = auto_selective_scaling(Scene.build(grains, Material(E, 0.16, density), law, friction))
-        print(json.dumps({"law": label, **auto}))
+        scene = Scene.build(grains, Material(E, 0.16, density), law, friction)
+        print(json.dumps({"law": label, "run": "collision", **auto_selective_scaling(scene)}))
+        if stress is not None:  # the lab test at that stress, driven at I = 5e-4
+            print(json.dumps({"law": label, "run": "lab test, I = 5e-4", **auto_selective_scaling(scene, (5e-4, stress))}))
 
 
 def main() -> None:
