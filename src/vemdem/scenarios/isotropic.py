@@ -73,8 +73,7 @@ def measures(records: list[dict]) -> dict:
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
-    largest = max(s["stress"] for s in cfg["stages"])
-    sample = sample_in(cfg, out_dir, base_dir, progress, resume, cell_for, largest)
+    sample = sample_in(cfg, out_dir, base_dir, progress, resume, cell_for)
     out_dir, t_start = sample.out_dir, sample.t_start
     cell, scene = sample.cell, sample.scene
     servos = [Servo(scene.contact, cell.wall[n], (lambda t, n=n: cell.area(n, t)), gain=cfg["servo"]["gain"])

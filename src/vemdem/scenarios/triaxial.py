@@ -132,7 +132,7 @@ def preparation(cfg: dict, figures_e0: float) -> dict:
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     sigma_c = cfg["consolidation"]["stress"]
-    sample = sample_in(cfg, out_dir, base_dir, progress, resume, cell_for, sigma_c)
+    sample = sample_in(cfg, out_dir, base_dir, progress, resume, cell_for)
     out_dir, t_start = sample.out_dir, sample.t_start
     cell, scene, integrator = sample.cell, sample.scene, sample.integrator
     density = scene.material.density
