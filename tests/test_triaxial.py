@@ -13,6 +13,8 @@ from vemdem.scenarios.registry import checked_config
 from vemdem.solver.state import State
 
 SIGMA_C = 20e3
+# the pack's mean equivalent diameter (summary.json's grain_size): the per-stress law 2 sigma_3 d^2 on it
+GRAIN_SIZE = 0.0009771359919118823
 CONFIG = {
     "scenario": "triaxial",
     "pack": {"n_grains": 12, "seed": 3, "mu_s": 0.0, "mu_d": 0.0, "grains": {"size": 1.0e-3, "vertices": 8},
@@ -22,7 +24,7 @@ CONFIG = {
     "servo": {"inertia_number": 2e-3},
     "model": {"grains": "rigid"},
     "solver": {"integrator": "explicit"},
-    "contact": {"mu_s": 0.3, "mu_d": 0.3, "reference_force": 2 * SIGMA_C * 1.0e-3**2},  # the per-stress law at
+    "contact": {"mu_s": 0.3, "mu_d": 0.3, "reference_force": 2 * SIGMA_C * GRAIN_SIZE**2},  # the per-stress law at
     "output": {"every": 1e-3, "vtk": False},  # 2 sigma d^2: this file's subject is not the law (docs/contact.md)
 }  # fmt: skip
 
@@ -82,6 +84,7 @@ def test_a_given_reference_force_is_the_law_in_use(run):
     per-stress law at 2 sigma_3 d^2); the friction springs stay within the contact layer under it."""
     _, summary, _ = run
     assert summary["contact"]["reference_force"] == pytest.approx(CONFIG["contact"]["reference_force"], rel=1e-9)
+    assert summary["grain_size"] == pytest.approx(GRAIN_SIZE, rel=1e-12)  # the pack the law was pinned for
     assert summary["contact"]["penalty_exponent"] == 2.0
     assert summary["friction"]["beyond_contact_layer"] is False
 
