@@ -161,7 +161,7 @@ def _headline_keys() -> set:
 def auto_table(size: float = 0.9e-3, E: float = 90e9, density: float = 2200.0) -> None:
     """What "auto" chooses for 0.9 mm sand grains under the weight's law and the laws a laboratory
     test sets for its stress (reference force 2 sigma d^2): no run, the grains' spectra only."""
-    from vemdem.contact.defaults import default_contact_laws  # noqa: PLC0415
+    from vemdem.contact.defaults import default_contact_laws, material_contact_laws  # noqa: PLC0415
     from vemdem.geometry import sand_grain  # noqa: PLC0415
     from vemdem.model.scene import Scene  # noqa: PLC0415
     from vemdem.model.selective import auto_selective_scaling  # noqa: PLC0415
@@ -175,6 +175,11 @@ def auto_table(size: float = 0.9e-3, E: float = 90e9, density: float = 2200.0) -
         print(json.dumps({"law": label, "run": "collision", **auto_selective_scaling(scene)}))
         if stress is not None:  # the lab test at that stress, driven at I = 5e-4
             print(json.dumps({"law": label, "run": "lab test, I = 5e-4", **auto_selective_scaling(scene, (5e-4, stress))}))
+    law, friction = material_contact_laws(size, E, 0.16)
+    scene = Scene.build(grains, Material(E, 0.16, density), law, friction)
+    for label, stress in (("the material's, 25 kPa", 25e3), ("the material's, 100 kPa", 100e3),
+                          ("the material's, 1 MPa", 1e6)):  # fmt: skip
+        print(json.dumps({"law": label, "run": "lab test, I = 5e-4", **auto_selective_scaling(scene, (5e-4, stress))}))
 
 
 def main() -> None:

@@ -30,7 +30,7 @@ from vemdem.driver.loop import simulate
 from vemdem.lab.path import LoadPath
 from vemdem.lab.servo import Servo
 from vemdem.scenarios.identity import run_identity
-from vemdem.scenarios.oedometer import SCHEMA, Oedometer, pack_config_for, stages_from, with_test_law
+from vemdem.scenarios.oedometer import SCHEMA, Oedometer, pack_config_for, stages_from
 from vemdem.scenarios.pack import initial_state_from
 from vemdem.scenarios.registry import checked_config, example_text
 from vemdem.solver.api import make_integrator
@@ -133,11 +133,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     raw = tomllib.loads(Path(args.config).read_text() if args.config else example_text("oedometer"))
     cfg, _ = checked_config(raw)
-    # both runs under the oedometer's own law for this decade (set for its largest stress) and
+    # both runs under the oedometer's own law (the material's, or the config's reference force) and
     # from the pack it settles under that law, as `vemdem run` would
     cfg["stages"] = [{"stress": args.low, "max_time": args.max_time, "max_strain": 0.6},
                      {"stress": args.high, "max_time": args.max_time, "max_strain": 0.6}]  # fmt: skip
-    cfg = with_test_law(cfg)
     out = Path(args.out)
     decades = np.log10(args.high / args.low)
     print(f"{args.low:g} -> {args.high:g} Pa ({decades:.2f} decades)", flush=True)

@@ -10,6 +10,7 @@ from vemdem.analysis.oedometer import (
     hysteresis_energy,
     inertia_number,
     moduli,
+    modulus_exponent,
     oedometer_figures,
     turning_points,
 )
@@ -54,6 +55,30 @@ def test_k0_moduli_and_the_residual_strain_of_an_elastic_path():
     assert out["residual_strain"] == pytest.approx(100e3 / M_LOAD - 75e3 / M_UN)
     assert out["love_weber_error_at_turns"] == pytest.approx(0.03)
     assert out["stress_error_at_turns"] == 0.0
+
+
+def power_law_path(exponent: float, stresses, C: float = 3e3) -> list[dict]:
+    """First loading of a sample whose tangent modulus is M = C sigma^m: eps = sigma^(1 - m) / (C (1 - m))."""
+    return [record(k, s, s, s ** (1 - exponent) / (C * (1 - exponent))) for k, s in enumerate(stresses)]
+
+
+@pytest.mark.parametrize("exponent", [1.0 / 3.0, 0.5, 0.8])
+def test_the_modulus_exponent_of_a_power_law(exponent):
+    """Stages a constant ratio apart: the secant moduli are C' sigma_mean^m exactly (the exponent to
+    round-off); unevenly spaced, the fit is within a few hundredths."""
+    stresses = [10e3, 30e3, 90e3, 270e3, 810e3]
+    out = oedometer_figures(power_law_path(exponent, stresses), np.zeros((0, len(HEADER))))
+    assert out["modulus_exponent"] == pytest.approx(exponent, rel=1e-9)
+    uneven = oedometer_figures(power_law_path(exponent, [10e3, 30e3, 100e3, 300e3, 1e6]), np.zeros((0, len(HEADER))))
+    assert uneven["modulus_exponent"] == pytest.approx(exponent, abs=0.02)
+
+
+def test_the_modulus_exponent_takes_first_loading_only_and_needs_two_intervals():
+    stages = elastic_path()  # 25 -> 50 -> 100 kPa at one modulus, then unloading and reloading
+    assert oedometer_figures(stages, np.zeros((0, len(HEADER))))["modulus_exponent"] == pytest.approx(0.0, abs=1e-12)
+    loading, _ = moduli(turning_points(stages[:2]))
+    assert modulus_exponent(loading) is None  # one interval: no slope
+    assert oedometer_figures(stages[:2], np.zeros((0, len(HEADER))))["modulus_exponent"] is None
 
 
 def test_the_hysteresis_of_a_cycle_is_the_net_work_of_its_unloading_and_reloading():
@@ -101,7 +126,9 @@ def test_each_grains_largest_strain_over_the_frames_and_the_validated_range(tmp_
 SMALL = {"scenario": "oedometer", "pack": {"n_grains": 4, "seed": 5, "grains": {"vertices": 8, "size": 1.2e-3},
                                            "box": {"width": 3.2e-3, "depth": 3.2e-3}},
          "settle": {"min_time": 0.04}, "output": {"every": 2e-3, "vtk": False}, "lid": {"gap": 0.01},
-         "servo": {"inertia_number": 1e-2}, "stages": [{"stress": 400.0, "max_time": 0.03}]}  # fmt: skip
+         "servo": {"inertia_number": 1e-2}, "stages": [{"stress": 400.0, "max_time": 0.03}],
+         # the per-stress law at 2 x 400 Pa x d^2: these tests' subject is the ring and the pack, not the law
+         "contact": {"reference_force": 2 * 400.0 * 1.2e-3**2}}  # fmt: skip
 
 
 def _side_walls_vertical_force(tmp_path, ring_friction: bool):
@@ -124,8 +151,7 @@ def test_a_lubricated_ring_carries_no_vertical_force_and_a_rough_one_does(tmp_pa
     assert smooth_normal.max() > 0 and rough_normal.max() > 0  # the grains press the side walls in both
     assert smooth_fz.max() <= 1e-12 * smooth_normal.max()  # round-off of the normal force alone
     assert rough_fz.max() > 1e-3 * rough_normal.max()
-    # the law set for the path's largest stress on the pack's nominal grain size: 2 x 400 Pa x d^2
-    # (scenarios/lab.contact_at_stress), so that the pack settles under the law the test loads with
+    # the given law (the per-stress law at 2 x 400 Pa x d^2) is the one the test loads with
     d = SMALL["pack"]["grains"]["size"]
     assert summary["contact"]["reference_force"] == pytest.approx(2 * 400.0 * d**2)
 

@@ -8,6 +8,9 @@ lid's work over it):
   their mean; Jaky's 1 - sin(phi) is its classic estimate for sands.
 - constrained moduli M = d sigma_v / d eps_a between consecutive turning points, loading (first
   loading and reloading marked) and unloading, each with the stresses it spans.
+- modulus_exponent: the slope of log M against log sigma_v over the first-loading intervals
+  (M = C sigma_v^m: m about 0.5 for sands, 1/3 for Hertz's contacts under a fixed fabric), each
+  interval's stress the geometric mean of its ends; None with fewer than two such intervals.
 - hysteresis_energy: the lid's net work on the sample over the first unload-reload loop, from the
   start of the first unloading to the end of the reloading stage that reaches the stress the
   unloading began from; where the path has no reloading, over the whole path (a load-unload
@@ -66,6 +69,22 @@ def moduli(points: list[dict], start_strain: float = 0.0) -> tuple[list, list]:
     return loading, unloading
 
 
+def modulus_exponent(loading: list[dict]) -> float | None:
+    """The least-squares slope of log(modulus) against log(stress) over the first-loading entries
+    of `moduli`'s loading list (kind "virgin"), each at the geometric mean of the stresses it spans:
+    for M = C sigma^m and stages a constant ratio apart the secant moduli give m exactly. None with
+    fewer than two intervals of positive stresses and moduli."""
+    virgin = [e for e in loading
+              if e["kind"] == "virgin" and min(e["from_Pa"], e["to_Pa"], e["modulus_Pa"]) > 0]  # fmt: skip
+    if len(virgin) < 2:
+        return None
+    log_stress = np.log([np.sqrt(e["from_Pa"] * e["to_Pa"]) for e in virgin])
+    log_modulus = np.log([e["modulus_Pa"] for e in virgin])
+    if np.ptp(log_stress) == 0:
+        return None
+    return float(np.polyfit(log_stress, log_modulus, 1)[0])
+
+
 def hysteresis_energy(points: list[dict]) -> float | None:
     """The lid's net work over the first unload-reload loop, or over the whole path where it never
     reloads to where the unloading began (module docstring); None without an unloading."""
@@ -92,6 +111,7 @@ def oedometer_figures(stages: list[dict], rows: np.ndarray) -> dict:
     loading, unloading = moduli(points)
     out["constrained_modulus_loading_Pa"] = loading
     out["constrained_modulus_unloading_Pa"] = unloading
+    out["modulus_exponent"] = modulus_exponent(loading)
     out["hysteresis_energy"] = hysteresis_energy(points)
     out["residual_strain"] = points[first_unload]["end_strain"] if first_unload < len(points) else None
     out["stress_error_at_turns"] = max((abs(p["end_stress"] - p["target"]) / p["target"] for p in points), default=None)

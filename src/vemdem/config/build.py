@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contact.defaults import GAP_FRACTION, default_contact_laws
+from ..contact.defaults import GAP_FRACTION, default_contact_laws, material_contact_laws
 from ..contact.walls import Motion, PlaneWall, ServoMotion
 from ..geometry.overlap import first_overlap
 from ..geometry.polyhedron import GeometryError, Polyhedron
@@ -151,6 +151,27 @@ def activation_gap_from(cfg: dict, size: float) -> float:
     return cfg["contact"]["activation_gap"] or GAP_FRACTION * size
 
 
+def contact_laws_from(cfg: dict, size: float, material) -> tuple:
+    """The `[contact]` table's interface and friction laws for grains of mean equivalent diameter
+    `size`: the material's law (contact.defaults.material_contact_laws) where `law = "material"`
+    and no reference_force is given, the weight's (default_contact_laws, at the given reference
+    force where there is one) otherwise."""
+    contact = cfg["contact"]
+    overrides = {k: v for k, v in contact.items() if k not in ("mu_s", "mu_d", "law") and v is not None}
+    material_law = contact.get("law", "weight") == "material" and contact["reference_force"] is None
+    try:
+        if material_law:
+            return material_contact_laws(size, material.E, material.nu, contact["mu_s"], contact["mu_d"], **overrides)
+        if "layer_modulus" in overrides:
+            raise ValueError("contact.layer_modulus: only the material's law has a layer modulus (law = "
+                             "\"material\", without a reference_force)")  # fmt: skip
+        return default_contact_laws(size, material.E, material.density, float(np.linalg.norm(cfg["gravity"])),
+                                    contact["mu_s"], contact["mu_d"], **overrides)  # fmt: skip
+    except ValueError as exc:
+        message = str(exc)
+        raise ConfigError(message if message.startswith(("contact.", "material.")) else f"contact: {message}") from None
+
+
 def scene_from(grains: list, cfg: dict, planes: list, meshes: list = (), quasi_static: tuple | None = None) -> Scene:
     """A scene of placed grains and walls with the config's material, vem, contact and solver
     (mass scaling) settings; the contact laws' scales come from the mean grain size.
@@ -161,13 +182,7 @@ def scene_from(grains: list, cfg: dict, planes: list, meshes: list = (), quasi_s
     # rigid-grain kinematics are unchanged and only the elastic (and explicit-step) time scales move
     material = material_from(cfg, scaling)
     size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in grains]))
-    contact = cfg["contact"]
-    overrides = {k: v for k, v in contact.items() if k not in ("mu_s", "mu_d") and v is not None}
-    try:
-        law, friction = default_contact_laws(size, material.E, material.density, float(np.linalg.norm(cfg["gravity"])),
-                                             contact["mu_s"], contact["mu_d"], **overrides)  # fmt: skip
-    except ValueError as exc:
-        raise ConfigError(f"contact: {exc}") from None
+    law, friction = contact_laws_from(cfg, size, material)
     scene = Scene.build(grains, material, law, friction, list(planes), list(meshes), cfg["gravity"],
                         vem_options_from(cfg), mass_scaling=scaling, grain_model=cfg["model"]["grains"])  # fmt: skip
     scale_deformation_modes(scene, cfg["solver"]["selective_mass_scaling"], cfg["solver"]["integrator"], quasi_static)

@@ -9,7 +9,7 @@ from dataclasses import replace
 from .checks import _DURATION, _in, _stress, _within, with_defaults
 from .lab_rules import LID_AREA_FACTOR
 from .schema import REQUIRED, Field, TableList, open_unit_interval
-from .tables import INITIAL_STATE, MODEL, SOLVER, granular_tables, pack_stage
+from .tables import CONTACT, INITIAL_STATE, MODEL, SOLVER, granular_tables, pack_stage
 
 # The servo of a stress-controlled wall (lab/servo.py) and the rule a load path's stage ends by
 # (lab/path.py): shared by the laboratory tests
@@ -35,6 +35,14 @@ STAGE = {
 }
 
 
+def reference_force_field(per_stress: str) -> Field:
+    """A lab test's `[contact] reference_force`: unset, the material's law; given, the per-force
+    law at that force, `per_stress` naming the value that gives the test's per-stress law."""
+    return replace(CONTACT["reference_force"], doc="N, force per contact at the switch gap of the per-force law "
+                   "(n1 = 2), in place of the material's law (the same at every stress; docs/contact.md); this "
+                   f"test's per-stress law: {per_stress} [unset: the material's law]")  # fmt: skip
+
+
 def lab_schema(scenario: str, mu: float, own: dict, servo: dict = SERVO, damping_ratio: float | None = 0.05,
                reference_force: str = "") -> dict:  # fmt: skip
     """A lab test's schema: its scenario, the pack it starts from, its `own` tables, the servo, the
@@ -42,15 +50,17 @@ def lab_schema(scenario: str, mu: float, own: dict, servo: dict = SERVO, damping
     default (no mass scaling; the rigid grains with `[model] grains = "rigid"`). Its steps stay at
     most 1e-4 s, as the lid cycles': with 1e-3 s a loose 60-grain pack under the lid stalled twice
     in its seating (Newton at 1e-10 s steps; docs/oedometer.md). A light contact damping
-    (`damping_ratio`; None: the package's) and the law set for the test's load, not the grains'
-    weight (scenarios/lab.contact_at_stress), as `reference_force` says."""
+    (`damping_ratio`; None: the package's) and the material's contact law (`[contact] law =
+    "material"`: Hertz's law of the grains' E, nu and size, the same at every stress;
+    contact/defaults.material_contact_laws); `reference_force` sets the per-force law instead, as
+    its doc says (`reference_force`: the old per-stress law's value, named for the test)."""
     schema = {"scenario": Field((scenario,), REQUIRED), "initial_state": INITIAL_STATE, "pack": pack_stage(), **own,
               "servo": servo, **granular_tables(mu_s=mu, mu_d=mu, every=5e-3)}  # fmt: skip
     schema["solver"] = SOLVER
-    contact = dict(schema["contact"]) if damping_ratio is None else with_defaults(schema["contact"],
-                                                                                  damping_ratio=damping_ratio)
-    contact["reference_force"] = replace(contact["reference_force"], doc="N, force per contact at the switch gap "
-                                         f"[{reference_force}]")  # fmt: skip
+    contact = with_defaults(schema["contact"], law="material")
+    if damping_ratio is not None:
+        contact = with_defaults(contact, damping_ratio=damping_ratio)
+    contact["reference_force"] = reference_force_field(reference_force)
     schema["contact"] = contact
     return schema
 
@@ -82,7 +92,7 @@ OEDOMETER = lab_schema("oedometer", 0.15, {
     },
     "stages": TableList(STAGE, min_items=1),
 }, reference_force="2 x the path's largest stress x the mean grain size squared; the pack settles under the "
-                   "weight's law")  # fmt: skip
+                   "same law")  # fmt: skip
 
 # the package's contact damping 0.5 kept the 100-grain example's five servos 5-15 % off their
 # target for 0.02 s of consolidation, where 0.05 held them within 1 %. The servo at rest below
@@ -155,7 +165,6 @@ ISOTROPIC = {
 # rigid grains, explicit, by default: the six walls' stages in a minute or two
 ISOTROPIC["model"] = with_defaults(MODEL, grains="rigid")
 ISOTROPIC["solver"] = with_defaults(SOLVER, integrator="explicit")
-ISOTROPIC["contact"] = with_defaults(ISOTROPIC["contact"], damping_ratio=0.05)  # as the triaxial's
-ISOTROPIC["contact"]["reference_force"] = replace(
-    TRIAXIAL["contact"]["reference_force"],
-    doc="N, force per contact at the switch gap [2 x the largest stage stress x the mean grain size squared]")
+ISOTROPIC["contact"] = with_defaults(ISOTROPIC["contact"], damping_ratio=0.05, law="material")  # as the triaxial's
+ISOTROPIC["contact"]["reference_force"] = reference_force_field("2 x the largest stage stress x the mean grain size "
+                                                                "squared")  # fmt: skip

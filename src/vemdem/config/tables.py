@@ -115,6 +115,14 @@ WALL = {
 }
 
 CONTACT = {
+    "law": Field(("weight", "material"), "weight",
+                 doc="weight: the law set for the grains' weight (its reference force 10 grain weights at the switch "
+                     "gap); material: Hertz's law of the grains' material and size (E, nu, d, the activation gap), "
+                     "the same at every stress (docs/contact.md, one law per material). A given reference_force sets "
+                     "the weight's kind of law at that force whichever is named"),
+    "layer_modulus": Field(float, None, _within(1e3, 1e13, "Pa"),
+                           "Pa, the modulus in the material's law's E* [the grains' E]; a softer named layer "
+                           "(law = \"material\" only)"),
     "mu_s": Field(float, 0.0, non_negative, "static friction coefficient"),
     "mu_d": Field(float, None, non_negative, "dynamic friction coefficient [mu_s]"),
     "activation_gap": Field(float, None, _within(1e-12, 1.0, "m"), "m [0.01 grain size]"),

@@ -138,6 +138,7 @@ def run_summary(scenario: str, scene: Scene, run: Run, t_start: float | None = N
         "contact": {
             "activation_gap": scene.contact.law.activation_gap,
             "penalty": scene.contact.law.penalty,
+            "penalty_exponent": scene.contact.law.penalty_exponent,  # 1.5: the material's (Hertz's) law
             "reference_force": scene.contact.law.switch_force,
             "tangential_penalty": scene.contact.friction.tangential_penalty,
             "damping_ratio": scene.contact.friction.damping_ratio,

@@ -93,7 +93,7 @@ def frame_row(cell: ShearBox, path: LoadPath, scene, state, contact, walls: tupl
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     sigma_n = cfg["normal"]["stress"]
-    sample = sample_in(cfg, out_dir, base_dir, progress, resume, shear_box, sigma_n)
+    sample = sample_in(cfg, out_dir, base_dir, progress, resume, shear_box, cfg["normal"]["stress"])
     out_dir, t_start = sample.out_dir, sample.t_start
     cell, scene, integrator = sample.cell, sample.scene, sample.integrator
     density = scene.material.density

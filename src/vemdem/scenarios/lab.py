@@ -1,5 +1,7 @@
 """What the lab tests' scenarios share on the config's side (the tests themselves run in lab/):
-the contact law set for the test's load, and the typed options their tables give the room."""
+the sample and its scene, and the typed options their tables give the room. Their contact law is
+the material's, the same at every stress (`[contact] law = "material"`, config.build.contact_laws_from),
+or the per-force law at a given `[contact] reference_force`."""
 
 from __future__ import annotations
 
@@ -14,24 +16,6 @@ from ..config.lab_rules import few_grains_note, sample_problem
 from ..lab.run import Output
 from ..solver.api import make_integrator
 from .pack import initial_state_from
-
-# The contact law's reference force in units of stress x d^2: the mean stress of a sand near its
-# peak (sigma_1 about 4 sigma_3) is about twice the confining stress, and a pair slides once its
-# force is carried with an elastic slip within the contact layer, up to 2 / (mu (1 - switch
-# factor)) reference forces (9.5 at mu 0.3): the strong chains at the peak stay inside that
-REFERENCE_STRESS = 2.0
-
-
-def contact_at_stress(cfg: dict, stress: float, grain_size: float) -> dict:
-    """The config with the contact law set for the test's load: unless `[contact] reference_force`
-    is given, REFERENCE_STRESS `stress` d^2, `stress` the confining stress or a shear box's normal
-    stress (docs/contact.md: the weight's force, the default elsewhere, would leave the contacts at
-    nanometre gaps where the barrier is stiffest, and the friction springs needing more slip than
-    the contact layer is thick before a pair slides)."""
-    if cfg["contact"]["reference_force"] is not None:
-        return cfg
-    force = REFERENCE_STRESS * stress * grain_size**2
-    return {**cfg, "contact": {**cfg["contact"], "reference_force": force}}
 
 
 def quasi_static_drive(cfg: dict, stress: float) -> tuple[float, float]:
@@ -59,14 +43,14 @@ class Sample:
 
 def sample_in(cfg: dict, out_dir: Path, base_dir, progress, resume: bool, cell_of, stress: float) -> Sample:
     """The pack (settled into DIR/pack, or `initial_state`), the cell `cell_of(cfg, initial)` around
-    it, and the scene of its grains in the cell's walls under the contact law set for the test's
-    `stress` (contact_at_stress), its selective mass scaling loaded at the test's rate (quasi_static_drive)."""
+    it, and the scene of its grains in the cell's walls under the config's contact law (the
+    material's, whatever the test's stress; module docstring), its selective mass scaling loaded at
+    the rate the test drives it at its `stress` (quasi_static_drive)."""
     t_start, out_dir = time.perf_counter(), Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     check_sample(cfg, initial)
     cell = cell_of(cfg, initial)
-    law = contact_at_stress(cfg, stress, cell.grain_size)
-    scene = scene_from(initial.grains, law, cell.walls, cell.meshes, quasi_static_drive(cfg, stress))
+    scene = scene_from(initial.grains, cfg, cell.walls, cell.meshes, quasi_static_drive(cfg, stress))
     return Sample(t_start, out_dir, initial, state_path, cell, scene, make_integrator(solver_options_from(cfg), scene))
 
 

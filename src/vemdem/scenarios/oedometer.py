@@ -52,7 +52,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
-from .lab import check_sample, contact_at_stress, output_of, quasi_static_drive, servo_options
+from .lab import check_sample, output_of, quasi_static_drive, servo_options
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
@@ -152,24 +152,16 @@ def stages_from(cfg: dict, density: float, height: float, grain_size: float) -> 
             for k, s in enumerate(cfg["stages"])]  # fmt: skip
 
 
-def with_test_law(cfg: dict) -> dict:
-    """The config with the contact law set for the path's largest stress (under the weight's law
-    the lid's load squeezes the contacts to nanometre gaps, where steps fall to 1e-8 s)."""
-    largest = max(s["stress"] for s in cfg["stages"])
-    return contact_at_stress(cfg, largest, cfg["pack"]["grains"]["size"])
-
-
 def pack_config_for(cfg: dict) -> dict:
-    """The pack stage's config: the pack settles under the test's law too, so that the test does
-    not begin with a jump of every contact's force (docs/oedometer.md)."""
-    cfg = with_test_law(cfg)
+    """The pack stage's config: the pack settles under the test's law (the material's, or a given
+    reference force's), so that the test does not begin with a jump of every contact's force
+    (docs/oedometer.md)."""
     return pack_config(cfg, cfg["contact"]["reference_force"])
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    cfg = with_test_law(cfg)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
     check_sample(cfg, initial)
     test = Oedometer(cfg, initial)

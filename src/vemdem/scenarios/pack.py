@@ -96,10 +96,14 @@ def pack_config(cfg: dict, reference_force: float | None = None) -> dict:
     material, vem and solver settings, its own friction and the default normal damping
     (lid_compression's light damping is for the lid cycle), and the weight's contact law unless
     `reference_force` names the law the test will load it with (a pack settled under the weight's
-    law meets a stiffer law with every contact's force multiplied by their ratio)."""
+    law meets a stiffer law with every contact's force multiplied by their ratio) or the test's
+    law is the material's (`[contact] law = "material"` without a reference force: the pack
+    settles under it, one law throughout)."""
     table = dict(cfg["pack"])
+    material = cfg["contact"].get("law", "weight") == "material" and cfg["contact"]["reference_force"] is None
     contact = dict(cfg["contact"], mu_s=table.pop("mu_s"), mu_d=table.pop("mu_d"), damping_ratio=None,
-                   reference_force=reference_force)
+                   reference_force=reference_force, law="material" if material else "weight",
+                   layer_modulus=cfg["contact"].get("layer_modulus") if material else None)  # fmt: skip
     solver = dict(cfg["solver"], mass_damping=table.pop("mass_damping"))
     model = cfg["model"]
     if table.pop("model") == "rigid":
