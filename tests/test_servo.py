@@ -241,6 +241,32 @@ def test_each_stage_ends_at_its_target_at_rest_and_the_contacts_carry_the_lids_s
     assert records[1]["end_strain"] > max(records[0]["end_strain"], records[2]["end_strain"])
 
 
+def test_a_stage_begins_where_the_one_before_ended():
+    """A frame written at the step that ends a stage belongs to the next stage, its strain measured
+    from there: the next stage opens at that state, not a step later."""
+    scene, lid, lid_z = pressed_cube("rigid", 1e4)
+    weight = float(scene.bodies.body_mass[0]) * 9.81
+    servo = Servo(scene.contact, lid, SIZE * SIZE)
+    stages = [Stage(x * weight / SIZE**2, 0.1, 0.5, max_speed=1e-3) for x in (45.0, 180.0)]
+    path = LoadPath([servo], stages, lambda t, start: servo.travel_at(t) - (start[1] if start else 0.0),
+                    scene.bodies.lumped, scene.bodies.vertex_ptr, mark=lambda t: (t, servo.travel_at(t)))  # fmt: skip
+    integrator = make_integrator(SolverOptions(integrator="explicit"), scene)
+    seen = []
+
+    def on_step(st, info, h):
+        before = path.current
+        path.after_step(st, info)
+        if path.current > before and not path.done:  # what a frame at this state would read
+            seen.append((path.current, path.stage_records()[-1]["stage"], path.start[0] == st.t,
+                         path.strain(st.t, path.start)))  # fmt: skip
+
+    state, t_end = integrator.initial_state(), 0.0
+    while not path.done and t_end < 0.2:
+        t_end += 0.01
+        state, _ = integrator.advance(state, t_end, on_step, RunStats())
+    assert seen == [(1, 1, True, 0.0)]
+
+
 # ---------------------------------------------------------------- a servo wall in a scene config
 def servo_scene(tmp_path, servo: dict, lid: dict | None = None) -> dict:
     """A cube on the floor under a plane lid with a `[walls.servo]` table (scene scenario)."""

@@ -227,6 +227,11 @@ class LoadPath:
             self.current += 1
             if not self.done:
                 self._enter(self.current)
+                # the next stage begins here: a frame written at this state is the next stage's and
+                # its strain is measured from here (opened at the next step, a frame at this one
+                # carried the next stage's number with the strain of the stage before, and the
+                # triaxial's E50 from that row read 1.5-2 times its curve's)
+                self._open(state)
         return rec
 
     def _check_sample(self, state) -> None:
