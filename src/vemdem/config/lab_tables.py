@@ -162,7 +162,7 @@ ISOTROPIC = {
     "servo": with_defaults(SERVO, unbalanced_tolerance=0.1),
     **granular_tables(mu_s=0.3, mu_d=0.3, every=5e-3),
 }
-# rigid grains, explicit, by default: the six walls' stages in a minute or two
+# rigid grains, explicit, by default: the six walls' stages in a minute or two under the per-stress law
 ISOTROPIC["model"] = with_defaults(MODEL, grains="rigid")
 ISOTROPIC["solver"] = with_defaults(SOLVER, integrator="explicit")
 ISOTROPIC["contact"] = with_defaults(ISOTROPIC["contact"], damping_ratio=0.05, law="material")  # as the triaxial's
