@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import bench_dynamics as bd
-from vemdem.contact.defaults import default_contact_laws
+from vemdem.contact.defaults import default_contact_laws, material_contact_laws
 from vemdem.contact.walls import box_walls
 from vemdem.contact.model import ContactHistory
 from vemdem.io.state import load_state
@@ -85,7 +85,10 @@ def state_case(path: Path, tile: tuple[int, int] = (1, 1)):
     size = float(np.mean([np.cbrt(6 * g.volume / np.pi) for g in s.grains]))
     material = Material(bd.E, bd.NU, bd.DENSITY)
     contact = {"mu_s": bd.MU_S, "mu_d": bd.MU_D, **meta.get("contact", {})}
-    law, friction = default_contact_laws(size, material.E, material.density, bd.GRAVITY, **contact)
+    if contact.pop("law", "weight") == "material" and "reference_force" not in contact:  # config.build's choice
+        law, friction = material_contact_laws(size, material.E, material.nu, **contact)
+    else:
+        law, friction = default_contact_laws(size, material.E, material.density, bd.GRAVITY, **contact)
     walls = box_walls(*box, meta["floor"], tuple(centre))
     history = None
     if "lid" in meta:
