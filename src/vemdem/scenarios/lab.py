@@ -22,8 +22,8 @@ def quasi_static_drive(cfg: dict, stress: float) -> tuple[float, float]:
     """(I, sigma): the largest inertia number the test's servos and drives move at (`servo` and,
     where the test shears, `shear`), at the test's stress: the fastest the test loads its grains,
     which sets selective mass scaling's loading time (model.selective.lab_loading_time)."""
-    rates = [cfg["servo"]["inertia_number"]] + [cfg[t]["inertia_number"] for t in ("shear",) if t in cfg]
-    return max(rates), stress
+    shear = cfg["shear"]["inertia_number"] if "shear" in cfg else 0.0
+    return max(cfg["servo"]["inertia_number"], shear), stress
 
 
 @dataclass(frozen=True)
