@@ -88,6 +88,19 @@ def test_coulomb_fit_recovers_a_known_line_and_refuses_what_has_none():
         coulomb_fit([25e3, np.nan], [30e3, 20e3])
 
 
+def test_the_coulomb_line_through_the_origin_is_the_least_squares_one_without_an_intercept():
+    sigma = np.array([25e3, 50e3, 100e3])
+    exact = coulomb_fit(sigma, sigma * np.tan(np.radians(31.0)), through_origin=True)
+    assert exact["phi_deg"] == pytest.approx(31.0) and exact["cohesion_Pa"] == 0.0 and exact["r2"] == pytest.approx(1.0)
+    tau = np.array([20e3, 41e3, 79e3])
+    (slope,), *_ = np.linalg.lstsq(sigma[:, None], tau, rcond=None)  # one column: no intercept
+    fit = coulomb_fit(sigma, tau, through_origin=True)
+    assert np.tan(np.radians(fit["phi_deg"])) == pytest.approx(slope) and fit["cohesion_Pa"] == 0.0
+    # two tests at one normal stress still give a line through the origin
+    same = coulomb_fit([50e3, 50e3], [30e3, 40e3], through_origin=True)
+    assert np.tan(np.radians(same["phi_deg"])) == pytest.approx(0.7)
+
+
 def test_measures_refuse_runs_too_short_and_figures_say_why():
     with pytest.raises(ValueError, match="residual state needs 3"):
         residual(np.array([0.0, 1e-3]), np.array([0.3, 0.4]))

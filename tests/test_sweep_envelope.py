@@ -44,10 +44,15 @@ def test_each_seed_and_setting_gets_its_own_envelope(tmp_path):
     assert "consolidation.stress" in note and "2 panels" in note
     for case, result in zip(cases, results):
         c, phi_peak, phi_cs = ENVELOPES[case.params["contact.mu_s"], case.params["seed"]]
-        assert result["envelope_phi_peak_deg"] == pytest.approx(phi_peak, abs=1e-9)
-        assert result["envelope_cohesion_peak_Pa"] == pytest.approx(c, abs=1e-6)
-        assert result["envelope_phi_cs_deg"] == pytest.approx(phi_cs, abs=1e-9)
-        assert result["envelope_cohesion_cs_Pa"] == pytest.approx(0.0, abs=1e-6)
+        # the free line finds the cohesion the peaks were made with; the default goes through the origin
+        assert result["envelope_phi_peak_free_deg"] == pytest.approx(phi_peak, abs=1e-9)
+        assert result["envelope_cohesion_peak_free_Pa"] == pytest.approx(c, abs=1e-6)
+        assert result["envelope_cohesion_peak_Pa"] == 0.0
+        assert (result["envelope_phi_peak_deg"] > phi_peak) == (c > 0)  # the cohesion taken up by the angle
+        # a cohesionless critical state: both lines are the one it was made with
+        for tail in ("", "_free"):
+            assert result[f"envelope_phi_cs{tail}_deg"] == pytest.approx(phi_cs, abs=1e-9)
+            assert result[f"envelope_cohesion_cs{tail}_Pa"] == pytest.approx(0.0, abs=1e-6)
         assert result["envelope_tests_peak"] == 3
     assert (tmp_path / "envelope.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -59,8 +64,8 @@ def test_each_seed_and_setting_gets_its_own_envelope(tmp_path):
     for mu in (0.3, 0.6):
         angles = [ENVELOPES[mu, seed][1] for seed in (1, 2)]
         # the mean row averages over the confining stresses as well: every case of a seed carries its envelope
-        assert float(means[mu]["envelope_phi_peak_deg"]) == pytest.approx(statistics.mean(angles))
-        assert float(stds[mu]["envelope_phi_peak_deg"]) > 0.5
+        assert float(means[mu]["envelope_phi_peak_free_deg"]) == pytest.approx(statistics.mean(angles))
+        assert float(stds[mu]["envelope_phi_peak_free_deg"]) > 0.5
 
 
 def test_a_failed_test_leaves_its_envelope_to_the_others(tmp_path):
@@ -86,13 +91,14 @@ def test_no_envelope_without_a_sweep_over_the_confining_stress(tmp_path):
     assert add_envelopes(pile, [{"status": "ok"}], tmp_path / "envelope.png") is None
 
 
-def test_tests_failing_at_one_mean_stress_give_an_error_not_an_envelope(tmp_path):
+def test_tests_failing_at_one_mean_stress_give_no_free_line_but_the_one_through_the_origin(tmp_path):
     cases, results = _sweep()
     for r in results:  # every test failed at the same s: no slope to fit
         r["sigma_3_peak_Pa"], r["sigma_1_peak_Pa"] = 100e3, 300e3
-    note = add_envelopes(cases, results, tmp_path / "envelope.png")
-    assert "same mean stress" in results[0]["envelope_peak_error"]
-    assert note.startswith("no envelope")
+    add_envelopes(cases, results, tmp_path / "envelope.png")
+    assert "same mean stress" in results[0]["envelope_peak_free_error"]
+    # through the origin one stress ratio still gives its angle: R = 3 is 30 deg
+    assert results[0]["envelope_phi_peak_deg"] == pytest.approx(30.0)
 
 
 def test_a_direct_shear_sweep_over_the_normal_stress_gives_coulomb_lines(tmp_path):
@@ -112,8 +118,10 @@ def test_a_direct_shear_sweep_over_the_normal_stress_gives_coulomb_lines(tmp_pat
     assert "normal.stress" in note
     for case, result in zip(cases, results):
         c, phi_peak, phi_res = lines[case.params["seed"]]
-        assert result["envelope_phi_peak_deg"] == pytest.approx(phi_peak)
-        assert result["envelope_cohesion_peak_Pa"] == pytest.approx(c, abs=1e-6)
+        assert result["envelope_phi_peak_free_deg"] == pytest.approx(phi_peak)
+        assert result["envelope_cohesion_peak_free_Pa"] == pytest.approx(c, abs=1e-6)
+        if c == 0.0:  # a cohesionless line: the default envelope through the origin is that line
+            assert result["envelope_phi_peak_deg"] == pytest.approx(phi_peak)
         assert result["envelope_phi_residual_deg"] == pytest.approx(phi_res)
         assert result["envelope_tests_residual"] == 3
     assert (tmp_path / "envelope.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -13,6 +13,7 @@ from vemdem.analysis.triaxial import (
     critical_state,
     dilatancy_angle,
     friction_angle,
+    friction_angle_of_eta,
     mohr_coulomb_fit,
     peak,
     plot_envelope,
@@ -66,6 +67,8 @@ def test_peak_and_critical_state_of_a_closed_form_curve():
     assert 0.0 < excess < 2e-3
     # the mean of 501 evenly spaced rows against the integral mean: within the trapezoid's ends term
     assert cs["phi_cs_deg"] == pytest.approx(friction_angle(R_CS + excess), abs=1e-5)
+    assert cs["phi_cs_from_ratio_deg"] == pytest.approx(friction_angle(R_CS + excess), abs=1e-5)
+    assert cs["critical_state_window"] == window
     assert 30.0 < cs["phi_cs_deg"] < friction_angle(R_CS + 2 * excess)
     assert cs["phi_cs_deg"] - 30.0 > 0.5 * (friction_angle(R_CS + excess) - 30.0)  # the tail is seen, not lost
     # eta = 3 (R - 1) / (R + 2) is 6/5 at R = 3; the tail lifts it by d eta / dR = 9 / (R + 2)^2
@@ -74,6 +77,31 @@ def test_peak_and_critical_state_of_a_closed_form_curve():
     assert cs["q_over_p_cs"] > 1.2
     assert 0.0 < cs["phi_cs_spread_deg"] < 0.05
     assert 0.0 < cs["q_over_p_cs_spread"] < 0.005
+
+
+def test_the_angle_of_eta_is_the_angle_of_the_ratio_it_comes_from():
+    r = np.linspace(1.0, 6.0, 51)
+    eta = 3.0 * (r - 1.0) / (r + 2.0)  # q / p with sigma_2 = sigma_3
+    assert np.allclose(friction_angle_of_eta(eta), friction_angle(r), atol=1e-12)
+    assert isinstance(friction_angle_of_eta(1.2), float)
+
+
+def test_the_critical_state_angle_comes_from_the_mean_q_over_p_not_the_mean_ratio():
+    # a servo-held sigma_3 that swings 40-60 kPa under a steady sigma_1: the mean of R = s1/s3 reads
+    # high (Jensen: 1/s3 is convex), the mean of eta = q/p much less
+    e = np.linspace(0.0, 0.1, 101)
+    s1 = np.full_like(e, 150e3)
+    s3 = np.where(np.arange(len(e)) % 2 == 0, 40e3, 60e3)
+    cs = critical_state(e, s1, s3, window=0.05)
+    inside = e >= 0.05 - 1e-12
+    eta = [(a - b) / ((a + 2 * b) / 3) for a, b in zip(s1[inside], s3[inside])]
+    eta_mean = sum(eta) / len(eta)
+    assert cs["q_over_p_cs"] == pytest.approx(eta_mean, rel=1e-12)
+    assert cs["phi_cs_deg"] == pytest.approx(math.degrees(math.asin(3 * eta_mean / (6 + eta_mean))), abs=1e-9)
+    ratio_mean = float(np.mean(s1[inside] / s3[inside]))
+    assert cs["phi_cs_from_ratio_deg"] == pytest.approx(math.degrees(math.asin((ratio_mean - 1) / (ratio_mean + 1))))
+    # the angle of the mean stresses (R = 3, 30 deg) lies below both; the ratio's mean is the further
+    assert 30.0 < cs["phi_cs_deg"] < cs["phi_cs_from_ratio_deg"] - 0.4
 
 
 def test_critical_state_refuses_short_runs():
@@ -159,6 +187,20 @@ def test_mohr_coulomb_fit_recovers_cohesion_and_angle():
     noisy = s1 * np.array([1.03, 0.98, 1.01])
     fit = mohr_coulomb_fit(s3, noisy)
     assert fit["r2"] < 1.0 and 30.0 < fit["phi_deg"] < 40.0
+
+
+def test_the_mohr_coulomb_envelope_through_the_origin_is_tangent_to_every_circle_of_a_cohesionless_material():
+    s3 = np.array([25e3, 50e3, 100e3])
+    k2 = math.tan(math.radians(45.0 + 34.0 / 2.0)) ** 2  # the passive coefficient of 34 deg
+    fit = mohr_coulomb_fit(s3, k2 * s3, through_origin=True)
+    assert fit["phi_deg"] == pytest.approx(34.0) and fit["cohesion_Pa"] == 0.0
+    # scattered peaks: sin(phi) the s-t slope without an intercept, numpy's least squares the reference
+    s1 = np.array([90e3, 170e3, 360e3])
+    s, t = 0.5 * (s1 + s3), 0.5 * (s1 - s3)
+    (slope,), *_ = np.linalg.lstsq(s[:, None], t, rcond=None)
+    fit = mohr_coulomb_fit(s3, s1, through_origin=True)
+    assert math.sin(math.radians(fit["phi_deg"])) == pytest.approx(slope)
+    assert fit["r2"] < mohr_coulomb_fit(s3, s1)["r2"]  # the free line fits its own points better
 
 
 def test_mohr_coulomb_fit_of_one_test_and_bad_input():

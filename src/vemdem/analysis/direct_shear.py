@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .envelope import failure_pairs, fit_envelopes
+from .envelope import failure_pairs, fit_envelopes, line_fit
 from .triaxial import largest_finite, measured
 
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
@@ -112,11 +112,12 @@ def residual_stresses(x, ratio, sigma_n, tau, window: float = RESIDUAL_WINDOW) -
             "tau_residual_Pa": float(np.mean(np.asarray(tau, float)[inside]))}  # fmt: skip
 
 
-def coulomb_fit(sigma_n, tau) -> dict:
+def coulomb_fit(sigma_n, tau, through_origin: bool = False) -> dict:
     """The Coulomb line tau = c + sigma_n tan(phi) through one failure state per test, by least
-    squares: phi_deg, cohesion_Pa, r2, n. One test: the cohesionless angle of its ratio, c = 0,
-    r2 NaN. ValueError on stresses that are not finite (sigma_n not positive), on tests at one
-    normal stress, or on a line that falls with the normal stress."""
+    squares (c = 0 `through_origin`): phi_deg, cohesion_Pa, r2, n. One test: the cohesionless
+    angle of its ratio, c = 0, r2 NaN. ValueError on stresses that are not finite (sigma_n not
+    positive), on a free line through tests at one normal stress, or on a line that falls with
+    the normal stress."""
     s, t = np.atleast_1d(np.asarray(sigma_n, dtype=float)), np.atleast_1d(np.asarray(tau, dtype=float))
     if s.shape != t.shape or s.ndim != 1 or len(s) == 0:
         raise ValueError(f"one tau per sigma_n needed, got {t.shape} and {s.shape}")
@@ -126,16 +127,11 @@ def coulomb_fit(sigma_n, tau) -> dict:
         raise ValueError(f"sigma_n must be finite and positive, tau finite: test {i} has {s[i]!r}, {t[i]!r}")
     if len(s) == 1:
         return {"phi_deg": float(_angle(t[0] / s[0])), "cohesion_Pa": 0.0, "r2": float("nan"), "n": 1}
-    ds = s - s.mean()
-    if not np.any(ds):
+    if not through_origin and not np.any(s - s.mean()):
         raise ValueError("every test failed at the same normal stress: no envelope slope to fit")
-    slope = float(ds @ (t - t.mean()) / (ds @ ds))
+    intercept, slope, r2 = line_fit(s, t, through_origin)
     if slope <= 0.0:
         raise ValueError(f"tau falls with sigma_n (slope {slope:.4g}): no friction angle")
-    intercept = float(t.mean() - slope * s.mean())
-    residual_ = t - (intercept + slope * s)
-    total = float(np.sum((t - t.mean()) ** 2))
-    r2 = 1.0 - float(residual_ @ residual_) / total if total > 0 else float("nan")
     return {"phi_deg": float(_angle(slope)), "cohesion_Pa": intercept, "r2": r2, "n": len(s)}
 
 

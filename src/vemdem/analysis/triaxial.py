@@ -13,9 +13,13 @@ Strains are measured from the start of shear: the consolidation stage is the sam
   confining stresses and with the literature.
 - peak: the largest R over the shear (phi_peak), where it happens, and the largest deviator q.
   Dense packs peak and then soften; loose ones harden monotonically to their critical state.
-- critical state: the state sheared at constant volume and stress ratio. Measured as the means
-  of R (phi_cs) and of eta = q / p over the last `window` of axial strain; the spread (standard
-  deviation over that window) says whether the run got there or is still drifting.
+- critical state: the state sheared at constant volume and stress ratio. Measured as the mean of
+  eta = q / p over the last `window` of axial strain, phi_cs its triaxial-compression angle
+  sin(phi) = 3 eta / (6 + eta); the spread (standard deviation of the frames' angles over that
+  window) says whether the run got there or is still drifting. eta is linear in the stresses'
+  fluctuations where R = sigma_1 / sigma_3 divides by the smaller, noisier one: the mean of R
+  reads high by about half its variance over (R + 1)^2 (1.6 deg at a 7 deg spread), so the angle
+  of the mean R is reported beside it (phi_cs_from_ratio_deg), not as phi_cs.
 - dilatancy angle psi: Bolton's (1986) triaxial form sin(psi) = -(d eps_v / d eps_a) /
   (2 - d eps_v / d eps_a), its largest value over the test. The slope is a least-squares line
   over a moving window of axial strain, so that frame-to-frame noise of a DEM sample does not
@@ -26,6 +30,8 @@ Strains are measured from the start of shear: the consolidation stage is the sam
   plane (s = (sigma_1 + sigma_3) / 2, t = (sigma_1 - sigma_3) / 2): t = a + s tan(alpha) maps
   to sin(phi) = tan(alpha), c = a / cos(phi). The s-t line is exact for Mohr circles tangent to
   a straight envelope, where fitting tau-sigma points would need the tangent points first.
+  A sweep's envelope goes through the origin (a = 0: a cohesionless material), the free line
+  beside it (analysis.envelope.fit_envelopes).
 - max_inertia_number: the largest inertia number over the shear frames, the check that the
   shear was quasi-static.
 """
@@ -36,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .envelope import fit_envelopes
+from .envelope import fit_envelopes, line_fit
 
 HEADER = ("time", "stage", "axial_strain", "volumetric_strain", "sigma_1", "sigma_3", "q", "p", "void_ratio",
           "coordination", "fabric_anisotropy", "inertia_number", "sigma_1_contacts", "sigma_3_contacts", "unbalanced")  # fmt: skip
@@ -52,6 +58,14 @@ def friction_angle(ratio):
     cohesionless Mohr-Coulomb: sin(phi) = (R - 1) / (R + 1). Scalars give a float, arrays an array."""
     r = np.asarray(ratio, dtype=float)
     phi = np.degrees(np.arcsin((r - 1.0) / (r + 1.0)))
+    return float(phi) if phi.ndim == 0 else phi
+
+
+def friction_angle_of_eta(eta):
+    """The mobilised friction angle (degrees) of eta = q / p in triaxial compression (sigma_2 =
+    sigma_3): sin(phi) = 3 eta / (6 + eta), friction_angle of R = (3 + 2 eta) / (3 - eta)."""
+    e = np.asarray(eta, dtype=float)
+    phi = np.degrees(np.arcsin(3.0 * e / (6.0 + e)))
     return float(phi) if phi.ndim == 0 else phi
 
 
@@ -91,9 +105,10 @@ def peak(axial, sigma_1, sigma_3) -> dict:
 
 def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
     """The means over the rows in the last `window` of axial strain (module docstring): phi_cs_deg
-    from the mean principal stress ratio, phi_cs_spread_deg the standard deviation of the rows'
-    own angles, q_over_p_cs and its spread, window_rows, and the mean principal stresses
-    sigma_1_cs_Pa and sigma_3_cs_Pa (the critical state's failure state for an envelope).
+    from the mean q / p (q_over_p_cs, and its spread), phi_cs_spread_deg the standard deviation of
+    the rows' own angles, phi_cs_from_ratio_deg the angle of the mean principal stress ratio,
+    critical_state_window and window_rows, and the mean principal stresses sigma_1_cs_Pa and
+    sigma_3_cs_Pa (the critical state's failure state for an envelope).
     ValueError where the run spans less than `window` or fewer than 3 rows lie in it (no mean
     worth reporting)."""
     axial, s1, s3 = (np.asarray(a, dtype=float) for a in (axial, sigma_1, sigma_3))
@@ -112,8 +127,10 @@ def critical_state(axial, sigma_1, sigma_3, window: float = 0.05) -> dict:
         raise ValueError(f"sigma_1 did not exceed sigma_3 over the last {window:g} of axial strain (mean ratio "
                          f"{np.mean(r):.3g}): no critical state of a compression test")
     eta = q / p
-    return {"phi_cs_deg": friction_angle(np.mean(r)), "phi_cs_spread_deg": float(np.std(friction_angle(r))),
-            "q_over_p_cs": float(np.mean(eta)), "q_over_p_cs_spread": float(np.std(eta)), "window_rows": n,
+    return {"phi_cs_deg": friction_angle_of_eta(np.mean(eta)),
+            "phi_cs_spread_deg": float(np.std(friction_angle_of_eta(eta))),
+            "phi_cs_from_ratio_deg": friction_angle(np.mean(r)), "q_over_p_cs": float(np.mean(eta)),
+            "q_over_p_cs_spread": float(np.std(eta)), "critical_state_window": window, "window_rows": n,
             "sigma_1_cs_Pa": float(np.mean(s1[inside])), "sigma_3_cs_Pa": float(np.mean(s3[inside]))}  # fmt: skip
 
 
@@ -181,11 +198,11 @@ def secant_modulus_50(axial, q) -> float:
     return float(half / strain)
 
 
-def mohr_coulomb_fit(sigma_3, sigma_1) -> dict:
+def mohr_coulomb_fit(sigma_3, sigma_1, through_origin: bool = False) -> dict:
     """The Mohr-Coulomb envelope through one failure state per test (module docstring): phi_deg,
-    cohesion_Pa, r2 of the s-t line, n. One test: the cohesionless angle of its ratio, c = 0,
-    r2 NaN. ValueError on stresses that are not finite and positive, or on an envelope no
-    friction angle gives."""
+    cohesion_Pa (0 `through_origin`), r2 of the s-t line, n. One test: the cohesionless angle of
+    its ratio, c = 0, r2 NaN. ValueError on stresses that are not finite and positive, or on an
+    envelope no friction angle gives."""
     s3, s1 = np.atleast_1d(np.asarray(sigma_3, dtype=float)), np.atleast_1d(np.asarray(sigma_1, dtype=float))
     if s3.shape != s1.shape or s3.ndim != 1 or len(s3) == 0:
         raise ValueError(f"one sigma_1 per sigma_3 needed, got {s1.shape} and {s3.shape}")
@@ -197,17 +214,12 @@ def mohr_coulomb_fit(sigma_3, sigma_1) -> dict:
     if n == 1:
         return {"phi_deg": friction_angle(s1[0] / s3[0]), "cohesion_Pa": 0.0, "r2": float("nan"), "n": 1}
     s, t = 0.5 * (s1 + s3), 0.5 * (s1 - s3)
-    ds = s - s.mean()
-    if not np.any(ds):
+    if not through_origin and not np.any(s - s.mean()):
         raise ValueError("every test failed at the same mean stress s: no envelope slope to fit")
-    slope = float(ds @ (t - t.mean()) / (ds @ ds))
-    intercept = float(t.mean() - slope * s.mean())
+    intercept, slope, r2 = line_fit(s, t, through_origin)
     if not -1.0 < slope < 1.0:
         raise ValueError(f"the s-t line's slope {slope:.4g} is sin(phi), which must lie in (-1, 1)")
     phi = np.arcsin(slope)
-    residual = t - (intercept + slope * s)
-    total = float(np.sum((t - t.mean()) ** 2))
-    r2 = 1.0 - float(residual @ residual) / total if total > 0 else float("nan")
     return {"phi_deg": float(np.degrees(phi)), "cohesion_Pa": intercept / float(np.cos(phi)), "r2": r2, "n": n}
 
 
