@@ -93,7 +93,8 @@ def test_summary_is_strict_json_with_the_named_keys(run):
     out, summary, _ = run
     on_disk = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     for key in ("phi_peak_deg", "phi_cs_deg", "phi_cs_spread_deg", "dilatancy_angle_deg", "E50_Pa",
-                "max_inertia_number", "sigma_3_peak_Pa", "sigma_1_peak_Pa", "sigma_3_cs_Pa", "sigma_1_cs_Pa"):
+                "max_inertia_number", "sigma_3_peak_Pa", "sigma_1_peak_Pa", "sigma_3_cs_Pa", "sigma_1_cs_Pa",
+                "sigma_3_error_mean", "sigma_3_error_abs_mean", "sigma_3_error_max"):
         assert isinstance(on_disk[key], float), key
     assert (out / "triaxial.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

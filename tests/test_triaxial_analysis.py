@@ -258,6 +258,18 @@ def test_triaxial_figures_measure_the_shear_from_its_start(tmp_path):
     assert "phi_cs_deg" not in fig_short and fig_short["phi_peak_deg"] == pytest.approx(fig["phi_peak_deg"])
     assert triaxial_figures(rows[:20])["shear_rows"] == 0
 
+    # the held stress over the shear frames only: the consolidation's rows (here 10 % off) do not count
+    rows = synthetic_rows()
+    n_c = int(np.sum(rows[:, HEADER.index("stage")] == 0))
+    rows[:n_c, HEADER.index("sigma_3")] = 1.1 * SIGMA_3
+    rows[n_c::2, HEADER.index("sigma_3")] = 1.03 * SIGMA_3  # every other shear frame 3 % high, the rest on target
+    held = triaxial_figures(rows, SIGMA_3)
+    n_high = len(range(n_c, len(rows), 2))
+    assert held["sigma_3_error_mean"] == pytest.approx(0.03 * n_high / (len(rows) - n_c), rel=1e-9)
+    assert held["sigma_3_error_abs_mean"] == pytest.approx(held["sigma_3_error_mean"], rel=1e-9)
+    assert held["sigma_3_error_max"] == pytest.approx(0.03, rel=1e-9)
+    assert "sigma_3_error_mean" not in triaxial_figures(rows)  # no target given, nothing to hold it to
+
     # smoke checks: the figures are written
     plot_triaxial(rows, tmp_path / "triaxial.png", "synthetic", fig)
     plot_triaxial(short, tmp_path / "short.png", "synthetic, short", fig_short)

@@ -34,6 +34,8 @@ Strains are measured from the start of shear: the consolidation stage is the sam
   beside it (analysis.envelope.fit_envelopes).
 - max_inertia_number: the largest inertia number over the shear frames, the check that the
   shear was quasi-static.
+- held stress: the lateral walls' sigma_3 against the confining stress over the shear frames,
+  its mean relative error (signed and absolute) and its largest.
 """
 
 from __future__ import annotations
@@ -246,11 +248,21 @@ def shear_strains(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return shear, axial - axial[0], volumetric - volumetric[0]
 
 
-def triaxial_figures(rows: np.ndarray) -> dict:
+def held_stress(sigma_3, target: float) -> dict:
+    """How closely the servos held the confining stress over the shear frames, relative to
+    `target`: sigma_3_error_mean (signed: above the target positive), sigma_3_error_abs_mean
+    and sigma_3_error_max (the largest magnitude)."""
+    error = (np.asarray(sigma_3, dtype=float) - target) / target
+    return {"sigma_3_error_mean": float(np.mean(error)), "sigma_3_error_abs_mean": float(np.mean(np.abs(error))),
+            "sigma_3_error_max": float(np.max(np.abs(error)))}  # fmt: skip
+
+
+def triaxial_figures(rows: np.ndarray, confining_stress: float | None = None) -> dict:
     """summary.json's measures from the frames (rows: columns of HEADER), over the shear rows: peak,
-    critical_state, dilatancy_angle, E50_Pa and max_inertia_number (over the frames where it is
-    finite). A measure the run cannot give (too short, no shear at all) is reported as its
-    `*_error` string instead of failing the run's summary."""
+    critical_state, dilatancy_angle, E50_Pa, max_inertia_number (over the frames where it is
+    finite) and, given the confining stress, held_stress. A measure the run cannot give (too
+    short, no shear at all) is reported as its `*_error` string instead of failing the run's
+    summary."""
     shear, axial, volumetric = shear_strains(rows)
     out: dict = {"shear_rows": len(shear)}
     if len(shear) < 2:
@@ -262,6 +274,8 @@ def triaxial_figures(rows: np.ndarray) -> dict:
                           ("dilatancy", lambda: dilatancy_angle(axial, volumetric, dilatancy_window(axial))),
                           ("E50", lambda: {"E50_Pa": secant_modulus_50(axial, s1 - s3)})):  # fmt: skip
         measured(out, name, measure)
+    if confining_stress is not None:
+        out.update(held_stress(s3, confining_stress))
     out["max_inertia_number"] = largest_finite(shear[:, HEADER.index("inertia_number")])
     return out
 

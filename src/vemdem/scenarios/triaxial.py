@@ -154,7 +154,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
                             resume=resume)  # fmt: skip
     records = path.stage_records()
     rows = until_sheared(rows, records[1]["end_time"] if len(records) > 1 else None)
-    figures = triaxial_figures(rows)
+    figures = triaxial_figures(rows, sigma_c)
     warn_unmeasured(figures)
     shear_rows = rows[rows[:, 1] == 1]
     e0 = float(shear_rows[0, 8]) if len(shear_rows) else None
