@@ -213,6 +213,9 @@ def _absolute_paths(raw: dict, base_dir: Path) -> dict:
 
     fix(raw, "initial_state")
     fix(raw.get("grain", {}), "file")
+    for grains in (raw.get("pack", {}).get("grains"), raw.get("grains")):
+        if isinstance(grains, dict) and grains.get("files"):
+            grains["files"] = [str(resolve_path(f, base)) for f in grains["files"]]
     for item in raw.get("grains", []) if isinstance(raw.get("grains"), list) else []:
         fix(item, "file")
     for item in raw.get("walls", []) if isinstance(raw.get("walls"), list) else []:
@@ -258,7 +261,7 @@ class SharedPack:
     cases: tuple[int, ...]  # the cases that start from it
 
 
-def shared_packs(cases: list[Case], out: Path) -> list[SharedPack]:
+def shared_packs(cases: list[Case], out: Path, base_dir: Path = Path(".")) -> list[SharedPack]:
     """Cases whose pack stages would settle the same pack (the same fingerprint: [pack] table,
     material, model, solver) share one, settled once. A sweep over the collapse's friction or the
     lid's speed then settles one pack per seed, not one per case; the pack is deterministic, so
@@ -266,7 +269,7 @@ def shared_packs(cases: list[Case], out: Path) -> list[SharedPack]:
     groups: dict[str, list[int]] = {}
     configs: dict[str, dict] = {}
     for i, case in enumerate(cases):
-        stage = pack_stage(case.raw)
+        stage = pack_stage(_absolute_paths(case.raw, base_dir))  # files named as the case will name them
         if stage is not None:
             key, config = stage
             groups.setdefault(key, []).append(i)
@@ -387,7 +390,7 @@ def run_cases(
     with dask_client(scheduler, workers, dashboard) as client:
         # pure=False: a re-run on a shared cluster must run again, not reuse a cached result
         packs: dict[int, tuple] = {}
-        for shared in shared_packs(cases, out):
+        for shared in shared_packs(cases, out, base_dir):
             future = client.submit(run_pack, shared.config, str(shared.folder), str(shared.folder.parent), pure=False)
             packs.update({i: (future, str(shared.folder)) for i in shared.cases})
         futures = [

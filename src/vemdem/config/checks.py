@@ -67,6 +67,17 @@ def _within(lo, hi, unit, lo_open=False):
     return check
 
 
+def _file_list(v):
+    """Check: a list of file names."""
+    return None if all(isinstance(f, str) and f for f in v) else "must be a list of file names (strings)"
+
+
+def _fractions(v):
+    """Check: a list of positive finite numbers (shares, normalised where used)."""
+    ok = all(isinstance(f, int | float) and not isinstance(f, bool) and math.isfinite(f) and f > 0 for f in v)
+    return None if ok else "must be a list of positive numbers"
+
+
 def _count(lo, hi):
     """Check: an integer count from lo to hi; more is a typo that would run out of memory or time."""
     return lambda v: None if lo <= v <= hi else f"must be from {lo:,} to {hi:,}"

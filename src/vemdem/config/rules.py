@@ -21,6 +21,18 @@ def _check_selective_scaling(cfg: dict) -> None:
         raise ConfigError('solver.selective_mass_scaling: rigid grains have no deformation modes to scale ("auto" or 0)')
 
 
+def _check_grain_files(grains: dict, where: str) -> None:
+    """A pack's grains from files: shape = 'file' and its files go together, one fraction per file."""
+    files, fractions = grains.get("files") or [], grains.get("fractions") or []
+    if grains.get("shape") == "file" and not files:
+        raise ConfigError(f"{where}.files: required when {where}.shape = 'file' (a list of surface files)")
+    if files and grains.get("shape") != "file":
+        raise ConfigError(f"{where}.files: given with {where}.shape = {grains.get('shape')!r}; "
+                          "set shape = 'file' to build the grains from them")  # fmt: skip
+    if fractions and len(fractions) != len(files):
+        raise ConfigError(f"{where}.fractions: one per file in {where}.files ({len(files)}), got {len(fractions)}")
+
+
 def check_rules(cfg: dict) -> None:
     """Rules that tie several keys together; each raises a ConfigError naming the key."""
     contact = cfg.get("contact")
@@ -31,6 +43,10 @@ def check_rules(cfg: dict) -> None:
     if isinstance(pack, dict) and "mu_d" in pack and pack["mu_d"] > pack["mu_s"]:
         raise ConfigError(f"pack.mu_d: must not exceed pack.mu_s ({pack['mu_s']:g}), got {pack['mu_d']:g} "
                           "(its default where not set: give both)")  # fmt: skip
+    if isinstance(pack, dict) and isinstance(pack.get("grains"), dict):
+        _check_grain_files(pack["grains"], "pack.grains")
+    if cfg.get("scenario") == "pack" and isinstance(cfg.get("grains"), dict):
+        _check_grain_files(cfg["grains"], "grains")
     settle = cfg.get("settle")
     if isinstance(settle, dict) and "min_time" in settle and "max_time" in settle:
         if settle["min_time"] > settle["max_time"]:

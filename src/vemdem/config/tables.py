@@ -32,6 +32,8 @@ from .checks import (
     NEWTON_ITERATIONS,
     RIGID_NEWTON_ITERATIONS,
     _count,
+    _file_list,
+    _fractions,
     _in,
     _lid_frames,
     _mass_stabilised,
@@ -323,9 +325,15 @@ PACK = {
     "grains": {
         "size": Field(float, 1.45e-3, _LENGTH, "mean equivalent diameter (m)"),
         "size_spread": Field(float, 0.1, _in(0, 1, hi_open=True), "sizes uniform in size (1 +- size_spread)"),
-        "shape": Field(("sand", "angular"), "sand",
+        "shape": Field(("sand", "angular", "file"), "sand",
                        doc="sand: hull of points on an ellipsoid (rounded); angular: an ellipsoid cut by planes "
-                           "(flat faces, sharp edges; docs/results.md, grain shapes)"),
+                           "(flat faces, sharp edges; docs/results.md, grain shapes); file: the surfaces named "
+                           "in files"),
+        "files": Field(list, [], _file_list,
+                       "shape = 'file': surface files (STL/OBJ/PLY, relative to the config file), each grain one "
+                       "of them scaled to its drawn size"),
+        "fractions": Field(list, [], _fractions,
+                           "shape = 'file': the share of the grains each file makes, in number (not set: equal)"),
         "vertices": Field(int, 30, _count(8, MAX_VERTICES), "vertices per grain (angular: about)"),
         "elongation": Field(float, 0.8, _AXIS_RATIO, "intermediate/long axis of the grains' ellipsoid (Zingg's I/L)"),
         "flatness": Field(float, 0.8, _AXIS_RATIO, "short/intermediate axis of the grains' ellipsoid (Zingg's S/I)"),

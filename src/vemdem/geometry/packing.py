@@ -22,6 +22,28 @@ GRAIN_SHAPES = {"sand": sand_grain, "angular": angular_grain}
 SHAPE_KEYS = ("n_vertices", "elongation", "flatness", "roughness")
 
 
+class SurfaceShapes:
+    """A grain maker over given surfaces (a user's STL grains): each grain is one of `surfaces`,
+    drawn with the number shares `fractions` (equal where None) from the grain's own seed, centred
+    on its centroid and scaled to the drawn equivalent diameter `size` (pi size^3 / 6 its volume).
+    The shape keys of the built-in makers do not apply and are ignored."""
+
+    def __init__(self, surfaces: Sequence[Polyhedron], fractions: Sequence[float] | None = None):
+        if not surfaces:
+            raise ValueError("no surface to make grains of")
+        shares = np.ones(len(surfaces)) if not fractions else np.asarray(fractions, dtype=float)
+        if len(shares) != len(surfaces) or not np.all(np.isfinite(shares) & (shares > 0)):
+            raise ValueError(f"fractions: one positive share per surface ({len(surfaces)}), got {list(shares)}")
+        self.surfaces = [g.translated(-g.centroid) for g in surfaces]
+        self.diameters = np.array([(6.0 * g.volume / np.pi) ** (1.0 / 3.0) for g in self.surfaces])
+        self.cumulative = np.cumsum(shares / shares.sum())
+
+    def __call__(self, size: float, seed: int, **_shape_keys) -> Polyhedron:
+        u = np.random.default_rng(seed).uniform()
+        k = min(int(np.searchsorted(self.cumulative, u, side="right")), len(self.surfaces) - 1)
+        return self.surfaces[k].scaled(size / self.diameters[k])
+
+
 @dataclass(frozen=True)
 class Packing:
     """Grains placed without contact above `floor`, inside the walls of `box`.
@@ -56,7 +78,7 @@ def column_packing(
     clearance: float = 0.1,
     seed: int = 0,
     shape_params: dict | None = None,
-    shape: str = "sand",
+    shape="sand",
 ) -> Packing:
     """`n` sand grains in a column above the box, none touching another or a wall.
 
@@ -68,15 +90,16 @@ def column_packing(
     lowest vertex on the layer's base; the first base is clearance * size above the
     floor and each next one a gap above the previous layer's highest vertex (slabs
     rather than spheres, which keeps the column shorter). `shape` picks the grain maker
-    (GRAIN_SHAPES: "sand" rounded, "angular" cut), `shape_params` (keys n_vertices,
-    elongation, flatness, roughness) go to it. Everything random
+    (GRAIN_SHAPES: "sand" rounded, "angular" cut) or is one (SurfaceShapes: a user's
+    surfaces), `shape_params` (keys n_vertices, elongation, flatness, roughness) go to it. Everything random
     comes from one generator seeded with `seed`: same arguments, bitwise same packing.
     """
     footprint = _check_arguments(n, size, size_spread, box, clearance, shape_params)
-    if shape not in GRAIN_SHAPES:
+    if not callable(shape) and shape not in GRAIN_SHAPES:
         raise ValueError(f"shape must be one of {sorted(GRAIN_SHAPES)}, got {shape!r}")
     rng = np.random.default_rng(seed)
-    sizes, shapes, local = _oriented_grains(rng, n, size, size_spread, GRAIN_SHAPES[shape], shape_params)
+    make = shape if callable(shape) else GRAIN_SHAPES[shape]
+    sizes, shapes, local = _oriented_grains(rng, n, size, size_spread, make, shape_params)
     radii = np.array([np.linalg.norm(v, axis=1).max() for v in local])
     pitch = 2.0 * radii.max() * (1.0 + clearance)
     gap = clearance * radii.max()

@@ -29,8 +29,10 @@ from ..contact.walls import box_walls
 from ..driver.checkpoint import CheckpointError, step_changes
 from ..driver.loop import simulate
 from ..driver.summary import run_summary
-from ..geometry.packing import column_packing
+from ..geometry.packing import SurfaceShapes, column_packing
+from ..geometry.polyhedron import GeometryError
 from ..io.results import write_json
+from ..io.surfaces import load_surface
 from ..io.state import GranularState, StateFileError, friction_arrays, load_state, save_state
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
@@ -40,22 +42,47 @@ RESUMABLE = True  # `vemdem run ... --resume` continues from DIR/checkpoint.npz
 SCHEMA = tables.PACK
 
 
-def place(cfg: dict):
+def grain_maker(grains: dict, base_dir=None):
+    """The `[grains]` table's maker: a built-in shape's name, or the user's surfaces (shape =
+    'file') as a SurfaceShapes. A surface that is no valid grain is a ConfigError naming it."""
+    if grains["shape"] != "file":
+        return grains["shape"]
+    surfaces = []
+    for name in grains["files"]:
+        try:
+            surfaces.append(load_surface(resolve_path(name, base_dir)))
+        except GeometryError as exc:
+            raise ConfigError(f"grains.files: {exc}") from None
+    return SurfaceShapes(surfaces, grains["fractions"] or None)
+
+
+def place(cfg: dict, base_dir=None):
     g = cfg["grains"]
     shape = {"n_vertices": g["vertices"], "elongation": g["elongation"], "flatness": g["flatness"],
              "roughness": g["roughness"]}  # fmt: skip
+    make = grain_maker(g, base_dir)
     try:
         return column_packing(cfg["n_grains"], size=g["size"], size_spread=g["size_spread"],
                               box=(cfg["box"]["width"], cfg["box"]["depth"]), clearance=g["clearance"],
-                              seed=cfg["seed"], shape_params=shape, shape=g["shape"])  # fmt: skip
+                              seed=cfg["seed"], shape_params=shape, shape=make)  # fmt: skip
     except ValueError as exc:
         raise ConfigError(f"grains: {exc}") from None
+
+
+def grain_files_resolved(pack_cfg: dict, base_dir) -> dict:
+    """A pack config whose grains' files are absolute: a pack stage settles where its config file
+    is not, and its fingerprint then names the same files from any folder."""
+    files = pack_cfg["grains"].get("files") or []
+    if not files or base_dir is None:
+        return pack_cfg
+    absolute = [str(resolve_path(f, Path(base_dir).resolve())) for f in files]
+    return {**pack_cfg, "grains": {**pack_cfg["grains"], "files": absolute}}
 
 
 def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = False) -> dict:
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    packing = place(cfg)
+    packing = place(cfg, base_dir)
     scene = scene_from(packing.grains, cfg, box_walls(*packing.box))
     integrator = make_integrator(solver_options_from(cfg), scene)
     settle = cfg["settle"]
@@ -164,7 +191,8 @@ def initial_state_from(cfg: dict, base_dir, out_dir: Path, progress=None, resume
     if not cfg["initial_state"]:
         pack_dir = Path(out_dir) / "pack"
         path = pack_dir / "state.npz"
-        settle_stage(pack_cfg if pack_cfg is not None else pack_config(cfg), pack_dir, progress, resume)
+        pack_cfg = grain_files_resolved(pack_cfg if pack_cfg is not None else pack_config(cfg), base_dir)
+        settle_stage(pack_cfg, pack_dir, progress, resume)
     else:
         path = resolve_path(cfg["initial_state"], base_dir)
     try:
