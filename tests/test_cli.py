@@ -88,6 +88,23 @@ def test_examples_are_valid_configs(name, cli):
     assert cfg["scenario"]
 
 
+def test_example_dir_writes_the_config_with_the_files_it_names(cli, tmp_path):
+    code, out, err = cli("example", "triaxial-two-shapes")
+    assert code == 0 and "--dir" in err  # printed alone, the config says where its files come from
+    code, out, _ = cli("example", "triaxial-two-shapes", "--dir", str(tmp_path / "job"))
+    assert code == 0 and "vemdem run" in out
+    written = sorted(p.name for p in (tmp_path / "job").iterdir())
+    assert written == ["crushed.stl", "rounded.stl", "triaxial-two-shapes.toml"]
+    raw = tomllib.loads((tmp_path / "job" / "triaxial-two-shapes.toml").read_text())
+    assert sorted(raw["pack"]["grains"]["files"]) == ["crushed.stl", "rounded.stl"]
+    from vemdem.scenarios.pack import pack_config, place
+    from vemdem.scenarios.registry import checked_config
+
+    cfg, _ = checked_config(raw)
+    grains = place(pack_config(cfg), base_dir=tmp_path / "job").grains  # the files found beside the config
+    assert len(grains) == raw["pack"]["n_grains"] and len({len(g.vertices) for g in grains}) == 2
+
+
 def test_example_lists_names_and_rejects_unknown(cli):
     """`vemdem example` lists every example, one a line, each with what it runs."""
     code, out, _ = cli("example")

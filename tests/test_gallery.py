@@ -28,7 +28,8 @@ import numpy as np
 import pytest
 
 from vemdem.io.state import load_state
-from vemdem.scenarios.registry import EXAMPLES, checked_config, example_text, pack_stage, settle_pack
+from vemdem.scenarios.registry import (EXAMPLE_FILES, EXAMPLES, checked_config, example_text, pack_stage, settle_pack,
+                                       write_example)
 
 def merged(base: dict, changes: dict) -> dict:
     """`base` with `changes` applied: tables merged key by key, anything else (lists included) replaced."""
@@ -176,6 +177,7 @@ REDUCTIONS = {
     "triaxial": reduce_triaxial,
     "direct-shear": reduce_direct_shear,
     "triaxial-flexible": reduce_triaxial,
+    "triaxial-two-shapes": reduce_triaxial,
     "isotropic": reduce_isotropic,
 }
 
@@ -235,6 +237,7 @@ def gallery(tmp_path_factory):
             assert name in REDUCTIONS, f"add a reduction for example {name} to REDUCTIONS in tests/test_gallery.py"
             raw = REDUCTIONS[name](tomllib.loads(example_text(name)))
             base = tmp_path_factory.mktemp(name)
+            write_example(name, base)  # the config's own files beside it (an example's grain shapes)
             if raw.get("initial_state"):
                 assert name in UPSTREAM, (f"example {name} starts from initial_state = "
                                           f"{raw['initial_state']!r}: add the example that writes it to UPSTREAM "
@@ -395,7 +398,11 @@ def test_the_gallery_commands_chain_as_written():
     for words in gallery_commands(GALLERY.read_text()):
         if words[:2] == ["vemdem", "example"] and len(words) == 5 and words[3] == ">":
             assert words[2] in EXAMPLES, f"gallery: no example {words[2]!r}"
+            assert not EXAMPLE_FILES.get(words[2]), f"gallery: {words[2]} names files: write it with --dir"
             configs[words[4]] = words[2]
+        elif words[:2] == ["vemdem", "example"] and len(words) == 5 and words[3] == "--dir":
+            assert words[2] in EXAMPLES, f"gallery: no example {words[2]!r}"
+            configs[os.path.normpath(f"{words[4]}/{words[2]}.toml")] = words[2]
         elif words[:2] == ["vemdem", "run"]:
             config, out = words[2], Path(words[words.index("--out") + 1]).as_posix()
             assert config in configs, f"gallery: `vemdem run {config}` before a command writes {config}"

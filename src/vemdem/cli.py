@@ -33,7 +33,8 @@ from . import sweep
 from .config import ConfigError, load_toml
 from .driver.checkpoint import CheckpointError, checkpoint_books
 from .driver.loop import InitialStateError
-from .scenarios.registry import EXAMPLES, SCENARIOS, checked_config, example_line, example_text
+from .scenarios.registry import (EXAMPLE_FILES, EXAMPLES, SCENARIOS, checked_config, example_line,
+                                 example_text, write_example)
 
 # what a run writes into --out: --overwrite removes these and nothing else
 KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "history.csv", "grains.csv", "walls.csv",
@@ -64,6 +65,9 @@ def _parser() -> argparse.ArgumentParser:
     mode.add_argument("--overwrite", action="store_true", help="replace the results of an earlier run in DIR")
     ex = sub.add_parser("example", help="print an example config")
     ex.add_argument("name", nargs="?", help=f"one of: {', '.join(EXAMPLES)}")
+    ex.add_argument("--dir", type=Path, metavar="DIR",
+                    help="write DIR/NAME.toml and the files it names (an example's grain shapes) instead of "
+                         "printing the config")  # fmt: skip
     st = sub.add_parser("status", help="where a run stands: time, steps, Newton iterations, from its checkpoint")
     st.add_argument("out", type=Path, metavar="DIR", help="the run's output folder (as given to run --out)")
     st.add_argument("--json", action="store_true", help="print the status as JSON")
@@ -292,7 +296,15 @@ def cmd_example(args) -> int:
         print("\n".join(f"{name:<{width}}  {example_line(name)}" for name in EXAMPLES))
         return 0
     try:
-        sys.stdout.write(example_text(args.name))
+        if args.dir is None:
+            sys.stdout.write(example_text(args.name))
+            if EXAMPLE_FILES.get(args.name):
+                print(f"vemdem: {args.name} names files beside it: `vemdem example {args.name} --dir DIR` writes "
+                      "them with the config", file=sys.stderr)  # fmt: skip
+            return 0
+        written = write_example(args.name, args.dir)
+        print(f"wrote {', '.join(str(p) for p in written)}; run: vemdem run {written[0]} --out "
+              f"{args.dir / args.name}")  # fmt: skip
     except ConfigError as exc:
         print(f"vemdem: {exc}", file=sys.stderr)
         return 2

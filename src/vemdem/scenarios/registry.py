@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from importlib import import_module
 from importlib.resources import files
+from pathlib import Path
 
 from ..config import ConfigError, apply_schema
 from ..config.rules import check_given, check_rules
@@ -41,7 +42,8 @@ EXAMPLES.update({f"{name}-implicit": f"{name}-implicit.toml" for name in list(EX
 # the laboratory tests, at the real density
 EXAMPLES.update({"oedometer": "oedometer.toml", "paper-oedometer": "paper-oedometer.toml",
                  "soft-oedometer": "soft-oedometer.toml", "triaxial": "triaxial.toml",
-                 "triaxial-flexible": "triaxial-flexible.toml", "direct-shear": "direct-shear.toml",
+                 "triaxial-flexible": "triaxial-flexible.toml", "triaxial-two-shapes": "triaxial-two-shapes.toml",
+                 "direct-shear": "direct-shear.toml",
                  "isotropic": "isotropic.toml"})
 
 # what `vemdem example` prints beside each name: one line each
@@ -67,8 +69,12 @@ EXAMPLE_LINES = {
     "soft-oedometer": "rubber-like flexible grains compressed past jamming to 3 MPa",
     "triaxial": "drained triaxial compression of 100 rigid grains at 50 kPa: friction angles, dilatancy",
     "triaxial-flexible": "the triaxial example with flexible grains, implicit (mass scaling 100)",
+    "triaxial-two-shapes": "the triaxial example on grains of two STL shapes (write it with --dir)",
     "direct-shear": "a split box of 240 rigid grains sheared at 50 kPa: peak and residual angles",
 }
+
+# the files an example's config names beside it (in examples/, written beside the config)
+EXAMPLE_FILES = {"triaxial-two-shapes": ("shapes/rounded.stl", "shapes/crushed.stl")}
 
 
 def example_line(name: str) -> str:
@@ -101,6 +107,21 @@ def example_text(name: str) -> str:
     if name not in EXAMPLES:
         raise ConfigError(f"example: unknown example {name!r} (known: {', '.join(EXAMPLES)})")
     return files("vemdem").joinpath("examples", EXAMPLES[name]).read_text()
+
+
+def write_example(name: str, folder) -> list[Path]:
+    """The example's config as folder/NAME.toml, with the files it names beside it; the paths
+    written, the config first. A file already there is replaced."""
+    text = example_text(name)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [folder / f"{name}.toml"]
+    written[0].write_text(text)
+    for item in EXAMPLE_FILES.get(name, ()):
+        target = folder / Path(item).name
+        target.write_bytes(files("vemdem").joinpath("examples", item).read_bytes())
+        written.append(target)
+    return written
 
 
 def pack_stage(raw: dict) -> tuple[str, dict] | None:
