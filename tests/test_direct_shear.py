@@ -135,6 +135,10 @@ def test_the_lid_holds_the_normal_stress_while_the_lower_half_moves_at_its_speed
     # this 20-grain sample perturbed at round-off its mean stress here was 18.8, 19.0 and 20.3 kPa
     assert np.mean(moving["sigma_n"]) == pytest.approx(SIGMA_N, rel=0.1)
     assert summary["phi_peak_deg"] > 10.0 and np.all(np.isfinite(moving["tau_over_sigma_n"]))
+    # the summary's held stress is the shear frames' own
+    sheared = rows["sigma_n"][rows["stage"] == 1]
+    assert summary["sigma_n_error_mean"] == pytest.approx(np.mean(sheared / SIGMA_N - 1.0), rel=1e-9, abs=1e-12)
+    assert summary["sigma_n_error_max"] == pytest.approx(np.max(np.abs(sheared / SIGMA_N - 1.0)), rel=1e-9)
 
 
 def test_the_box_is_in_balance_along_the_shear(run):

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .envelope import failure_pairs, fit_envelopes, line_fit
-from .triaxial import largest_finite, measured
+from .triaxial import held_stress, largest_finite, measured
 
 HEADER = ("time", "stage", "shear_displacement", "vertical_displacement", "sigma_n", "tau", "tau_over_sigma_n",
           "void_ratio", "coordination", "inertia_number", "unbalanced", "frame_rise")  # fmt: skip
@@ -184,9 +184,10 @@ def plot_envelopes(panels: list[tuple], path: Path) -> None:
     plt.close(fig)
 
 
-def shear_figures(rows: np.ndarray) -> dict:
+def shear_figures(rows: np.ndarray, normal_stress: float | None = None) -> dict:
     """summary.json's measures over the shear rows (module docstring), with displacements from the
-    shear's start; a measure the run cannot give is its `*_error` string."""
+    shear's start, and given the target normal stress how closely the lid held it (sigma_n_error_*,
+    analysis.triaxial.held_stress); a measure the run cannot give is its `*_error` string."""
     shear = shear_rows(rows)
     out: dict = {"shear_rows": len(shear)}
     if len(shear) < 2:
@@ -202,6 +203,8 @@ def shear_figures(rows: np.ndarray) -> dict:
     sigma_n, tau = shear[:, HEADER.index("sigma_n")], shear[:, HEADER.index("tau")]
     measured(out, "peak_state", lambda: peak_stresses(ratio, sigma_n, tau))
     measured(out, "residual_state", lambda: residual_stresses(x, ratio, sigma_n, tau))
+    if normal_stress is not None:
+        out.update(held_stress(sigma_n, normal_stress, "sigma_n"))
     out["max_inertia_number"] = largest_finite(shear[:, HEADER.index("inertia_number")])
     return out
 

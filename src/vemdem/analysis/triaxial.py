@@ -248,13 +248,13 @@ def shear_strains(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return shear, axial - axial[0], volumetric - volumetric[0]
 
 
-def held_stress(sigma_3, target: float) -> dict:
-    """How closely the servos held the confining stress over the shear frames, relative to
-    `target`: sigma_3_error_mean (signed: above the target positive), sigma_3_error_abs_mean
-    and sigma_3_error_max (the largest magnitude)."""
-    error = (np.asarray(sigma_3, dtype=float) - target) / target
-    return {"sigma_3_error_mean": float(np.mean(error)), "sigma_3_error_abs_mean": float(np.mean(np.abs(error))),
-            "sigma_3_error_max": float(np.max(np.abs(error)))}  # fmt: skip
+def held_stress(values, target: float, name: str = "sigma_3") -> dict:
+    """How closely a servo held a stress over the shear frames, relative to `target`:
+    {name}_error_mean (signed: above the target positive), {name}_error_abs_mean and
+    {name}_error_max (the largest magnitude)."""
+    error = (np.asarray(values, dtype=float) - target) / target
+    return {f"{name}_error_mean": float(np.mean(error)), f"{name}_error_abs_mean": float(np.mean(np.abs(error))),
+            f"{name}_error_max": float(np.max(np.abs(error)))}  # fmt: skip
 
 
 def triaxial_figures(rows: np.ndarray, confining_stress: float | None = None) -> dict:

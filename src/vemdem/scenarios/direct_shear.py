@@ -117,7 +117,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     result, rows = run_path(scene, integrator, path, sample.initial, out_dir, duration=duration, output=output_of(cfg),
                             identity=identity, frames=frames, volume=cell.volume, progress=progress,
                             resume=resume)  # fmt: skip
-    figures = shear_figures(rows)
+    figures = shear_figures(rows, sigma_n)
     warn_unmeasured(figures)
     title = f"{scene.n_grains} grains ({cfg['model']['grains']}), sigma_n = {sigma_n / 1e3:g} kPa, {integrator.name}"
     plot_shear(rows, out_dir / "shear.png", title, figures)
