@@ -321,3 +321,20 @@ def test_a_shear_without_a_friction_angle_says_so_in_one_warning_line():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         warn_unmeasured({"phi_peak_deg": 35.0, "E50_error": "not the headline"})
+
+
+def test_a_test_driven_past_the_quasi_static_inertia_number_says_so_in_one_line():
+    from vemdem.scenarios.lab import QUASI_STATIC, RateWarning, warn_if_not_quasi_static
+
+    from vemdem.scenarios.registry import checked_config
+
+    cfg, _ = checked_config(tomllib.loads(example_text("triaxial")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_if_not_quasi_static(cfg)  # the example's I = 5e-4: quiet
+    fast = tomllib.loads(example_text("triaxial"))
+    fast["solver"]["mass_scaling"] = 100.0
+    fast["shear"]["inertia_number"] = 5.0 * QUASI_STATIC
+    cfg, _ = checked_config(fast)
+    with pytest.warns(RateWarning, match=r"shear.inertia_number = 0.005 at mass_scaling 100: the density integrated"):
+        warn_if_not_quasi_static(cfg)

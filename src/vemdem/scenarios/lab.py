@@ -18,6 +18,27 @@ from ..solver.api import make_integrator
 from .pack import initial_state_from
 
 
+# the inertia number below which a test's measures do not depend on its rate (GDR MiDi 2004;
+# da Cruz et al. 2005): the lab tests are driven below it at the density they integrate
+QUASI_STATIC = 1e-3
+
+
+class RateWarning(UserWarning):
+    """A lab test driven at an inertia number above QUASI_STATIC: its measures depend on its rate."""
+
+
+def warn_if_not_quasi_static(cfg: dict) -> None:
+    """One warning line where `[servo]` or `[shear]` `inertia_number` (at the density integrated:
+    the material's times `solver.mass_scaling`) exceeds QUASI_STATIC."""
+    for table in ("servo", "shear"):
+        value = cfg.get(table, {}).get("inertia_number")
+        if value is not None and value > QUASI_STATIC:
+            scaled = cfg["solver"]["mass_scaling"]
+            at = f"mass_scaling {scaled:g}: the density integrated" if scaled != 1.0 else "the real density"
+            warnings.warn(RateWarning(f"{table}.inertia_number = {value:g} at {at}: above {QUASI_STATIC:g} the test "
+                                      "is not quasi-static and its measures depend on its rate"), stacklevel=3)  # fmt: skip
+
+
 def quasi_static_drive(cfg: dict, stress: float) -> tuple[float, float]:
     """(I, sigma): the largest inertia number the test's servos and drives move at (`servo` and,
     where the test shears, `shear`), at the test's stress: the fastest the test loads its grains,
@@ -49,6 +70,7 @@ def sample_in(cfg: dict, out_dir: Path, base_dir, progress, resume: bool, cell_o
     t_start, out_dir = time.perf_counter(), Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume)
     check_sample(cfg, initial)
+    warn_if_not_quasi_static(cfg)
     cell = cell_of(cfg, initial)
     scene = scene_from(initial.grains, cfg, cell.walls, cell.meshes, quasi_static_drive(cfg, stress))
     return Sample(t_start, out_dir, initial, state_path, cell, scene, make_integrator(solver_options_from(cfg), scene))

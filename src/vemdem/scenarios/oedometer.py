@@ -52,7 +52,7 @@ from ..lab.run import Frames, run_path, write_summary
 from ..lab.servo import Servo
 from ..solver.api import make_integrator
 from .identity import run_identity
-from .lab import check_sample, output_of, quasi_static_drive, servo_options
+from .lab import check_sample, output_of, quasi_static_drive, servo_options, warn_if_not_quasi_static
 from .pack import initial_state_from, pack_config
 
 RESUMABLE = True
@@ -164,6 +164,7 @@ def run(cfg: dict, out_dir: Path, base_dir=None, progress=None, resume: bool = F
     out_dir = Path(out_dir)
     initial, state_path = initial_state_from(cfg, base_dir, out_dir, progress, resume, pack_config_for(cfg))
     check_sample(cfg, initial)
+    warn_if_not_quasi_static(cfg)
     test = Oedometer(cfg, initial)
     problem = lid_area_problem(cfg["lid"]["area"], test.cell.box[0] * test.cell.box[1], f"the box of {state_path}")
     if problem:
