@@ -112,8 +112,8 @@ def _row(name: str, label: str, summary: dict) -> dict:
 
 
 def bench(name: str, out: Path, lambdas: list, max_time: float | None, settings: list[str],
-          seed: int | None = None, stage_time: float | None = None) -> list[dict]:  # fmt: skip
-    raw = _example(name)
+          seed: int | None = None, stage_time: float | None = None, pack_settings: tuple = ()) -> list[dict]:  # fmt: skip
+    raw = _apply(_example(name), list(pack_settings))
     raw.pop("initial_state", None)
     if seed is not None:
         raw["pack"]["seed"] = seed
@@ -191,6 +191,9 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                         help="a config key of every run after the pack (repeatable)")
+    parser.add_argument("--pack-set", action="append", default=[], metavar="TABLE.KEY=VALUE",
+                        help="a config key of the example before its pack settles, and so of every run "
+                             "(pack.mu_s=0.15; contact.reference_force=0.162: the law the pack settles under)")
     parser.add_argument("--stage-time", type=float, default=None,
                         help="every [[stages]] max_time (s): an oedometer's stages end there if not at rest before")
     parser.add_argument("--seeds", default=None, help="comma-separated [pack] seeds: each example on each seed's pack")
@@ -206,7 +209,7 @@ def main() -> None:
     rows = []
     for name in args.examples.split(","):
         for seed in seeds:
-            new = bench(name, args.out / name, lambdas, args.max_time, args.set, seed, args.stage_time)
+            new = bench(name, args.out / name, lambdas, args.max_time, args.set, seed, args.stage_time, args.pack_set)
             for r in new:
                 print(json.dumps(r), flush=True)
             rows += new
