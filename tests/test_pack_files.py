@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
-
 from test_packing import near_pairs, separation
+
 from vemdem.config import ConfigError
 from vemdem.geometry import angular_grain, sand_grain
 from vemdem.geometry.packing import SurfaceShapes, column_packing

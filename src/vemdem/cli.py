@@ -33,8 +33,15 @@ from . import sweep
 from .config import ConfigError, load_toml
 from .driver.checkpoint import CheckpointError, checkpoint_books
 from .driver.loop import InitialStateError
-from .scenarios.registry import (EXAMPLE_FILES, EXAMPLES, SCENARIOS, checked_config, example_line,
-                                 example_text, write_example)
+from .scenarios.registry import (
+    EXAMPLE_FILES,
+    EXAMPLES,
+    SCENARIOS,
+    checked_config,
+    example_line,
+    example_text,
+    write_example,
+)
 
 # what a run writes into --out: --overwrite removes these and nothing else
 KNOWN_OUTPUTS = ("summary.json", "checkpoint.npz", "checkpoint.tmp.npz", "history.csv", "grains.csv", "walls.csv",

@@ -23,8 +23,8 @@ import numpy as np
 from ..analysis.pack import pack_measures
 from ..analysis.plots import plot_grains_3d
 from ..config import ConfigError, apply_schema, tables
-from ..config.tables import SETTLING_DAMPING
 from ..config.build import resolve_path, scene_from, solver_options_from
+from ..config.tables import SETTLING_DAMPING
 from ..contact.walls import box_walls
 from ..driver.checkpoint import CheckpointError, step_changes
 from ..driver.loop import simulate
@@ -32,8 +32,8 @@ from ..driver.summary import run_summary
 from ..geometry.packing import SurfaceShapes, column_packing
 from ..geometry.polyhedron import GeometryError
 from ..io.results import write_json
-from ..io.surfaces import load_surface
 from ..io.state import GranularState, StateFileError, friction_arrays, load_state, save_state
+from ..io.surfaces import load_surface
 from ..solver.api import make_integrator
 from .granular import at_rest, kinetic_ratio
 from .identity import run_identity
