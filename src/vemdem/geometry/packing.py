@@ -8,7 +8,7 @@ inside its own cell, and successive layers occupy disjoint horizontal slabs.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,7 +78,7 @@ def column_packing(
     clearance: float = 0.1,
     seed: int = 0,
     shape_params: dict | None = None,
-    shape="sand",
+    shape: str | Callable[..., Polyhedron] = "sand",
 ) -> Packing:
     """`n` sand grains in a column above the box, none touching another or a wall.
 
