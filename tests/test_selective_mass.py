@@ -10,7 +10,7 @@ import pytest
 import scipy.linalg
 import tomli_w
 
-from vemdem.contact.defaults import default_contact_laws
+from vemdem.contact.defaults import default_contact_laws, material_contact_laws
 from vemdem.geometry import sand_grain
 from vemdem.model.scene import Scene
 from vemdem.scenarios.registry import example_text
@@ -293,9 +293,29 @@ def test_a_quasi_static_test_loads_its_grains_over_its_strain_rate_not_a_contact
     assert lab["loading_time_s"] > 100 * collision["loading_time_s"]
     assert collision["bound"] == "vibration period" and collision["lambda"] < collision["lambda_contact"]
     assert lab["bound"] == "contact step" and lab["lambda"] == lab["lambda_contact"]
-    # the per-stress law carries 2 sigma d^2 at its switch gap: its strongest contacts are past it
-    assert lab["lambda_contact"] == pytest.approx(collision["lambda_contact"], rel=1e-12)
     assert lab["scaled_period_s"] <= lab["period_fraction"] * lab["loading_time_s"]
+
+
+def test_a_lab_tests_contact_bound_is_the_stiffness_at_a_grains_weight():
+    """In a lab test "auto" matches the grains' step to the contact step where the law carries a
+    grain's weight (its mass from the grains' lumped masses, at standard gravity where the scene has
+    none), so a rigid run's soft seating contacts do not outstep it; a collision keeps the switch
+    gap's stiffness."""
+    from vemdem.contact.law import normal_force
+    from vemdem.model.selective import auto_selective_scaling, stiffness_at_force
+
+    d, stress = 0.9e-3, 50e3
+    for law, friction in (default_contact_laws(d, 90e9, 2200.0, 9.81, reference_force=2.0 * stress * d**2),
+                          material_contact_laws(d, 90e9, 0.16)):  # fmt: skip
+        for gravity in ((0, 0, -3.0), (0, 0, 0)):
+            scene = Scene.build([sand_grain(d, 20, seed=3)], Material(90e9, 0.16, 2200.0), law, friction,
+                                gravity=gravity)  # fmt: skip
+            weight = float(scene.bodies.lumped.sum()) * (3.0 if gravity[2] else 9.81)
+            lab = auto_selective_scaling(scene, (5e-4, stress))
+            assert lab["contact_stiffness_N_per_m"] == pytest.approx(stiffness_at_force(law, weight), rel=1e-9)
+            k_switch = normal_force(law.switch_gap, law.packed())[1]
+            assert lab["contact_stiffness_N_per_m"] < k_switch
+            assert lab["lambda_contact"] > auto_selective_scaling(scene)["lambda_contact"]
 
 
 @pytest.mark.parametrize("n1", [1.5, 2.0])
