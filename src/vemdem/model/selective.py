@@ -5,7 +5,8 @@ The explicit step of flexible grains is the shortest of the grains' own critical
 contacts'. Scaling the deformation modes by 1 + lambda lengthens the first by sqrt(1 + lambda);
 the second tends to the rigid grains' contact step as lambda grows (a contact then meets the
 grain's rigid mobility). "auto" takes the lambda at which the grains' step reaches the rigid
-contact step of the stiffest contact the run expects,
+contact step of a contact at stiffness k, so that the grains' own step binds no step the contacts
+would not,
 
     lambda_contact = (dt_contact / dt_grain)^2 - 1,   dt_contact = 2 / sqrt(k 2 mob_max),
 
