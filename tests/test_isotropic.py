@@ -36,14 +36,21 @@ def run(tmp_path_factory):
 
 
 def test_each_stage_ends_at_its_mean_stress(run):
-    """Where a stage ends, at its target at rest or at its time limit with the walls hovering
-    about it, the six walls' mean stress (force over the face each closes) is the target."""
-    _, summary, _ = run
+    """Where a stage ends at its target at rest, the six walls' mean stress (force over the face
+    each closes) is the target. Where it ends at its time limit the walls hover about it, the
+    explicit step's servo swinging them by a few per cent from step to step (docs/servo.md): the
+    frames of the stage after its first carry the target on average, and the last step is near it."""
+    _, summary, rows = run
     stages = summary["stages"]
     assert [s["end_reason"] in ("reached", "max_time") for s in stages] == [True] * len(TARGETS), stages
-    for s, target, p in zip(stages, TARGETS, summary["mean_stress_Pa"]):
+    for k, (s, target, p) in enumerate(zip(stages, TARGETS, summary["mean_stress_Pa"])):
         assert s["target"] == target
-        assert p == pytest.approx(target, rel=0.03)
+        if s["end_reason"] == "reached":
+            assert p == pytest.approx(target, rel=0.03)
+            continue
+        held = rows["p"][rows["stage"] == k][1:]
+        assert len(held) >= 2 and np.mean(held) == pytest.approx(target, rel=0.03)
+        assert p == pytest.approx(target, rel=0.10)
 
 
 def test_the_walls_reactions_in_the_frames_give_the_mean_stress(run):
