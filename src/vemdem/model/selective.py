@@ -67,7 +67,7 @@ def seating_force(scene) -> float:
     """The weight of the mean grain at the density integrated (standard gravity in a scene without
     gravity): the force a settled pack's lightest loaded contacts carry."""
     g = float(np.linalg.norm(scene.gravity)) or STANDARD_GRAVITY
-    return float(scene.material.density * np.mean(scene.bodies.volume) * g)
+    return float(np.mean(scene.bodies.body_mass) * g)
 
 
 def lab_loading_time(scene, inertia_number: float, stress: float) -> float:
